@@ -1,0 +1,1 @@
+//! Reading and writing the raster formats users already have.
