@@ -1,1 +1,14 @@
-//! pipeline
+//! Stages over pairs and datasets, between the libraries and the command line: predicting a
+//! disparity for a pair, scoring it against ground truth, writing the procedural world in the public
+//! release's folder layout, the end-to-end demo and its HTML report.
+//!
+//! Every stage reports progress through [`Progress`] so the CLI can draw bars while tests stay quiet.
+
+pub mod demo;
+pub mod metrics;
+pub mod predict;
+pub mod progress;
+pub mod report;
+pub mod world_io;
+
+pub use progress::{Progress, Silent};

@@ -2,8 +2,8 @@
 //! reflected light of every ground point and wall; geometry never depends on it, so any appearance
 //! model keeps the ground-truth disparity exact.
 
-use crate::scene::Surface;
 use crate::class;
+use crate::scene::Surface;
 
 /// Sun direction and sky light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,7 +67,9 @@ impl Appearance for Neutral {
     fn wall(&self, s: &Surface, above_ground_m: f32, direct: f32, ambient: f32) -> [f32; 3] {
         let light = ambient + (1.0 - ambient) * direct;
         // Facades show a row of windows on every 3 m storey.
-        let window = s.class == class::BUILDING && (above_ground_m.rem_euclid(3.0)) > 1.1 && above_ground_m.rem_euclid(3.0) < 2.2;
+        let window = s.class == class::BUILDING
+            && (above_ground_m.rem_euclid(3.0)) > 1.1
+            && above_ground_m.rem_euclid(3.0) < 2.2;
         let shade = if window { 0.45 } else { 1.0 };
         s.facade.map(|a| a * light * shade)
     }

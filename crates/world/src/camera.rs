@@ -65,7 +65,9 @@ pub struct AffineCamera {
 impl AffineCamera {
     /// The raw camera of a view whose rectified image is `rectify` (raw → rectified) of the raw one.
     pub fn from_view(view: &ViewCamera, geo: &GeoFrame, rectify: &Homography) -> Self {
-        let unrectify = rectify.inverse().expect("rectifying homographies are invertible");
+        let unrectify = rectify
+            .inverse()
+            .expect("rectifying homographies are invertible");
         let m = &unrectify.0;
         assert!(
             m[2][0] == 0.0 && m[2][1] == 0.0,
@@ -176,12 +178,26 @@ mod tests {
             lat0: 48.85,
             gsd: 0.5,
         };
-        let cam = AffineCamera::from_view(&ViewCamera { slope: -0.3, offset: 0.0 }, &geo, &Homography::IDENTITY);
+        let cam = AffineCamera::from_view(
+            &ViewCamera {
+                slope: -0.3,
+                offset: 0.0,
+            },
+            &geo,
+            &Homography::IDENTITY,
+        );
         let centre = geo.lonlat(128.0, 128.0);
         let j = cam.to_satnerf_json("a", 256, 256, centre, (0.002, 0.002), (-5.0, 60.0));
         let rpc = &j["rpc"];
         let f = |k: &str| rpc[k].as_f64().unwrap();
-        let poly = |k: &str| -> Vec<f64> { rpc[k].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+        let poly = |k: &str| -> Vec<f64> {
+            rpc[k]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        };
         let (lon, lat, alt) = (centre.0 + 0.0007, centre.1 - 0.0011, 23.0);
         let (l, p, h) = (
             (lon - f("lon_offset")) / f("lon_scale"),

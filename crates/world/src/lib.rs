@@ -166,7 +166,10 @@ impl World {
     /// cameras and the scene's altitude range (the way a satellite pipeline should bound it).
     pub fn disparity_range(&self) -> (i32, i32) {
         let scene_max = self.params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
-        let (a, b) = (self.params.disparity_at(-1.0), self.params.disparity_at(scene_max));
+        let (a, b) = (
+            self.params.disparity_at(-1.0),
+            self.params.disparity_at(scene_max),
+        );
         (a.min(b).floor() as i32, a.max(b).ceil() as i32)
     }
 }
@@ -232,10 +235,17 @@ pub fn generate(
     let gsd = params.scene.gsd;
     let max_slope = params.left.slope.abs().max(params.right.slope.abs());
     let max_z = params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
-    let margin = (max_slope * max_z + params.left.offset.abs().max(params.right.offset.abs()) + 4.0).ceil();
+    let margin =
+        (max_slope * max_z + params.left.offset.abs().max(params.right.offset.abs()) + 4.0).ceil();
     let (x_lo, x_hi) = (-margin, w as f64 + margin);
-    let light = Lighting::from_angles(params.sun_elevation_deg, params.sun_azimuth_deg, params.ambient);
-    let shadow_pad = (max_z / params.sun_elevation_deg.to_radians().tan() / gsd).ceil().min(400.0);
+    let light = Lighting::from_angles(
+        params.sun_elevation_deg,
+        params.sun_azimuth_deg,
+        params.ambient,
+    );
+    let shadow_pad = (max_z / params.sun_elevation_deg.to_radians().tan() / gsd)
+        .ceil()
+        .min(400.0);
     let scene = Scene::new(
         params.scene.clone(),
         x_lo - shadow_pad,
@@ -376,7 +386,14 @@ pub fn generate(
         classes: truth_image(&|r| r.right_truth.iter().map(|t| t.1 as f32).collect()),
     };
     let disparity = truth_image(&|r| r.disparity.clone());
-    let occluded = Mask::new(w, h, rows.iter().flat_map(|r| r.occluded.iter().copied()).collect()).expect("sizes match");
+    let occluded = Mask::new(
+        w,
+        h,
+        rows.iter()
+            .flat_map(|r| r.occluded.iter().copied())
+            .collect(),
+    )
+    .expect("sizes match");
 
     let ortho: Vec<Surface> = (0..h)
         .into_par_iter()
@@ -385,8 +402,10 @@ pub fn generate(
             (0..w).map(move |x| scene.surface(x as f64, y as f64))
         })
         .collect();
-    let ortho_height = Image::new(w, h, 1, ortho.iter().map(|s| s.height).collect()).expect("sizes match");
-    let ortho_classes = Image::new(w, h, 1, ortho.iter().map(|s| s.class as f32).collect()).expect("sizes match");
+    let ortho_height =
+        Image::new(w, h, 1, ortho.iter().map(|s| s.height).collect()).expect("sizes match");
+    let ortho_classes =
+        Image::new(w, h, 1, ortho.iter().map(|s| s.class as f32).collect()).expect("sizes match");
 
     let geo = GeoFrame {
         lon0: params.lon0,

@@ -13,7 +13,9 @@ pub fn mix(mut z: u64) -> u64 {
 /// Hash of a seed and two lattice coordinates.
 #[inline]
 pub fn hash2(seed: u64, x: i64, y: i64) -> u64 {
-    mix(seed ^ mix((x as u64).wrapping_mul(0x9E37_79B9) ^ (y as u64).wrapping_mul(0x85EB_CA6B).rotate_left(29)))
+    mix(seed
+        ^ mix((x as u64).wrapping_mul(0x9E37_79B9)
+            ^ (y as u64).wrapping_mul(0x85EB_CA6B).rotate_left(29)))
 }
 
 /// A uniform number in [0, 1) from a hash.
@@ -74,7 +76,12 @@ pub fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
 pub fn fbm(seed: u64, x: f64, y: f64, octaves: u32) -> f64 {
     let (mut sum, mut norm, mut amp, mut freq) = (0.0, 0.0, 1.0, 1.0);
     for o in 0..octaves {
-        sum += amp * value_noise(seed.wrapping_add(o as u64 * 0x1F3D_5B79), x * freq, y * freq);
+        sum += amp
+            * value_noise(
+                seed.wrapping_add(o as u64 * 0x1F3D_5B79),
+                x * freq,
+                y * freq,
+            );
         norm += amp;
         amp *= 0.5;
         freq *= 2.0;

@@ -36,7 +36,12 @@ impl<'a> Profile<'a> {
             _ => h(k),
         };
         let ends = (0..n)
-            .map(|k| (joint(k, k.checked_sub(1)), joint(k, (k + 1 < n).then_some(k + 1))))
+            .map(|k| {
+                (
+                    joint(k, k.checked_sub(1)),
+                    joint(k, (k + 1 < n).then_some(k + 1)),
+                )
+            })
             .collect();
         Profile {
             x_lo,
@@ -68,7 +73,11 @@ pub enum Piece {
     Flat(usize),
     /// The wall at `boundary` (between pieces `boundary − 1` and `boundary`), belonging to the
     /// taller piece `owner` and rising from the height of piece `foot`.
-    Wall { boundary: usize, owner: usize, foot: usize },
+    Wall {
+        boundary: usize,
+        owner: usize,
+        foot: usize,
+    },
 }
 
 /// A visible interval [u0, u1] of image columns.
@@ -131,13 +140,21 @@ pub fn visible_spans(profile: &Profile, cam: &ViewCamera) -> Vec<Span> {
         } else {
             ((x + half, hi), (x - half, lo))
         };
-        push(cam.column(near.0, near.1), cam.column(far.0, far.1), Piece::Flat(k));
+        push(
+            cam.column(near.0, near.1),
+            cam.column(far.0, far.1),
+            Piece::Flat(k),
+        );
         // The wall towards the next piece in scan order; it faces the camera when it rises.
         let next = if sign > 0.0 { k + 1 } else { k.wrapping_sub(1) };
         if next >= n || cam.slope == 0.0 {
             continue;
         }
-        let next_near = if sign > 0.0 { profile.ends[next].0 } else { profile.ends[next].1 };
+        let next_near = if sign > 0.0 {
+            profile.ends[next].0
+        } else {
+            profile.ends[next].1
+        };
         if next_near > far.1 {
             let boundary = k.max(next);
             push(
@@ -233,7 +250,9 @@ mod tests {
 
     /// A 10-pixel-wide block of height 10 m on flat ground at 0 m.
     fn block_profile() -> Vec<Surface> {
-        (0..40).map(|k| flat(if (15..25).contains(&k) { 10.0 } else { 0.0 })).collect()
+        (0..40)
+            .map(|k| flat(if (15..25).contains(&k) { 10.0 } else { 0.0 }))
+            .collect()
     }
 
     #[test]
@@ -245,11 +264,22 @@ mod tests {
             let cam = ViewCamera { slope, offset: 0.0 };
             let spans = visible_spans(&profile, &cam);
             for w in spans.windows(2) {
-                assert!((w[0].u1 - w[1].u0).abs() < 1e-9, "gap between {:?} and {:?}", w[0], w[1]);
+                assert!(
+                    (w[0].u1 - w[1].u0).abs() < 1e-9,
+                    "gap between {:?} and {:?}",
+                    w[0],
+                    w[1]
+                );
             }
-            let walls: Vec<_> = spans.iter().filter(|s| matches!(s.piece, Piece::Wall { .. })).collect();
+            let walls: Vec<_> = spans
+                .iter()
+                .filter(|s| matches!(s.piece, Piece::Wall { .. }))
+                .collect();
             assert_eq!(walls.len(), 1, "slope {slope}: one wall faces the camera");
-            assert!((walls[0].u1 - walls[0].u0 - 5.0).abs() < 1e-9, "wall spans 10 m × 0.5 px/m");
+            assert!(
+                (walls[0].u1 - walls[0].u0 - 5.0).abs() < 1e-9,
+                "wall spans 10 m × 0.5 px/m"
+            );
             // The roof is shifted by slope·10 = ±5 px.
             let roof = spans.iter().find(|s| s.piece == Piece::Flat(20)).unwrap();
             assert!((roof.u0 - (20.0 + 5.0 * slope.signum())).abs() < 1e-9);
@@ -262,9 +292,14 @@ mod tests {
         let colours = vec![[0.5f32; 3]; surfaces.len()];
         let profile = Profile::new(0.0, 1.0, &surfaces, &colours);
         // Camera looking from −x: the ground just behind (x in [25, 30)) falls under the roof's projection.
-        let cam = ViewCamera { slope: 0.5, offset: 0.0 };
+        let cam = ViewCamera {
+            slope: 0.5,
+            offset: 0.0,
+        };
         let spans = visible_spans(&profile, &cam);
-        assert!(!spans.iter().any(|s| matches!(s.piece, Piece::Flat(k) if (25..30).contains(&k))));
+        assert!(!spans
+            .iter()
+            .any(|s| matches!(s.piece, Piece::Flat(k) if (25..30).contains(&k))));
         assert!(spans.iter().any(|s| s.piece == Piece::Flat(30)));
         // Each visible column maps back to a point that projects onto it.
         for u in [3.0, 17.5, 22.0, 27.0, 33.0] {
@@ -277,7 +312,9 @@ mod tests {
     #[test]
     fn gentle_slopes_are_continuous_and_fully_visible() {
         // A gable: up 0.2 m per piece, then down: no walls, every piece seen by both cameras.
-        let surfaces: Vec<Surface> = (0..40).map(|k| flat(0.2 * (20.0 - (k as f32 - 20.0).abs()))).collect();
+        let surfaces: Vec<Surface> = (0..40)
+            .map(|k| flat(0.2 * (20.0 - (k as f32 - 20.0).abs())))
+            .collect();
         let colours = vec![[0.5f32; 3]; surfaces.len()];
         let profile = Profile::new(0.0, 1.0, &surfaces, &colours);
         for slope in [0.5, -0.5] {
@@ -301,7 +338,10 @@ mod tests {
         let colours: Vec<[f32; 3]> = (0..surfaces.len()).map(|k| [k as f32 / 40.0; 3]).collect();
         let profile = Profile::new(-0.5, 1.0, &surfaces, &colours);
         // A nadir view (slope 0) shows each piece exactly in its pixel.
-        let cam = ViewCamera { slope: 0.0, offset: 0.0 };
+        let cam = ViewCamera {
+            slope: 0.0,
+            offset: 0.0,
+        };
         let spans = visible_spans(&profile, &cam);
         let px = rasterise(&profile, &cam, &spans, 30, |_, _, _| [9.0; 3]);
         for (i, p) in px.iter().enumerate() {

@@ -205,7 +205,10 @@ impl Scene {
 
     fn to_grid(&self, x: f64, y: f64) -> (f64, f64) {
         let (dx, dy) = (x - self.centre.0, y - self.centre.1);
-        (self.cos * dx + self.sin * dy, -self.sin * dx + self.cos * dy)
+        (
+            self.cos * dx + self.sin * dy,
+            -self.sin * dx + self.cos * dy,
+        )
     }
 
     fn to_ground(&self, p: f64, q: f64) -> (f64, f64) {
@@ -216,9 +219,9 @@ impl Scene {
     }
 
     fn river_distance(&self, x: f64, y: f64) -> f64 {
-        self.river
-            .as_ref()
-            .map_or(f64::INFINITY, |r| r.distance(x - self.centre.0, y - self.centre.1))
+        self.river.as_ref().map_or(f64::INFINITY, |r| {
+            r.distance(x - self.centre.0, y - self.centre.1)
+        })
     }
 
     /// Terrain altitude (metres) with the river valley carved in.
@@ -241,7 +244,10 @@ impl Scene {
         let pitch = self.params.block_pitch;
         let inset = self.params.road_width / 2.0 + 2.0;
         let (p0, q0) = (bi as f64 * pitch + inset, bj as f64 * pitch + inset);
-        let (p1, q1) = ((bi + 1) as f64 * pitch - inset, (bj + 1) as f64 * pitch - inset);
+        let (p1, q1) = (
+            (bi + 1) as f64 * pitch - inset,
+            (bj + 1) as f64 * pitch - inset,
+        );
         let r = rng.next_unit();
         let kind = match r {
             r if r < 0.45 => BlockKind::Residential,
@@ -291,16 +297,28 @@ impl Scene {
                     let pm = bp0 + (bp1 - bp0) * split;
                     let qm = bq0 + (bq1 - bq0) * rng.range(0.3, 0.7);
                     let id = id_base + 1;
-                    block
-                        .buildings
-                        .push(self.building(&mut rng, (bp0, bq0, pm, bq1), (10.0, 42.0), false, id));
-                    block
-                        .buildings
-                        .push(self.building(&mut rng, (pm, bq0, bp1, qm), (8.0, 30.0), false, id + 1));
+                    block.buildings.push(self.building(
+                        &mut rng,
+                        (bp0, bq0, pm, bq1),
+                        (10.0, 42.0),
+                        false,
+                        id,
+                    ));
+                    block.buildings.push(self.building(
+                        &mut rng,
+                        (pm, bq0, bp1, qm),
+                        (8.0, 30.0),
+                        false,
+                        id + 1,
+                    ));
                 } else {
-                    block
-                        .buildings
-                        .push(self.building(&mut rng, (bp0, bq0, bp1, bq1), (10.0, 45.0), false, id_base + 1));
+                    block.buildings.push(self.building(
+                        &mut rng,
+                        (bp0, bq0, bp1, bq1),
+                        (10.0, 45.0),
+                        false,
+                        id_base + 1,
+                    ));
                 }
                 // Rooftop plant rooms.
                 let roofs: Vec<Building> = block.buildings.clone();
@@ -310,7 +328,8 @@ impl Scene {
                         let cp = rng.range(roof.p0 + w, (roof.p1 - w).max(roof.p0 + w + 0.1));
                         let cq = rng.range(roof.q0 + h, (roof.q1 - h).max(roof.q0 + h + 0.1));
                         let mut b = roof.clone();
-                        (b.p0, b.q0, b.p1, b.q1) = (cp - w / 2.0, cq - h / 2.0, cp + w / 2.0, cq + h / 2.0);
+                        (b.p0, b.q0, b.p1, b.q1) =
+                            (cp - w / 2.0, cq - h / 2.0, cp + w / 2.0, cq + h / 2.0);
                         b.eave_m = roof.eave_m + rng.range(2.0, 4.0);
                         b.roof = ROOF_COLOURS[(rng.next_unit() * 6.0) as usize];
                         b.id = roof.id + 100 + block.buildings.len() as u64;
@@ -335,11 +354,15 @@ impl Scene {
         block.buildings.retain(|b| {
             let (x, y) = self.to_ground((b.p0 + b.p1) / 2.0, (b.q0 + b.q1) / 2.0);
             let reach = (b.p1 - b.p0).hypot(b.q1 - b.q0) / 2.0;
-            self.river.as_ref().is_none_or(|r| self.river_distance(x, y) > r.half_width + reach + margin)
+            self.river
+                .as_ref()
+                .is_none_or(|r| self.river_distance(x, y) > r.half_width + reach + margin)
         });
         block.trees.retain(|t| {
             let (x, y) = self.to_ground(t.p, t.q);
-            self.river.as_ref().is_none_or(|r| self.river_distance(x, y) > r.half_width + t.radius + 2.0)
+            self.river
+                .as_ref()
+                .is_none_or(|r| self.river_distance(x, y) > r.half_width + t.radius + 2.0)
         });
         block
     }
@@ -371,7 +394,10 @@ impl Scene {
     fn push_tree(&self, block: &mut Block, rng: &mut Stream, p: f64, q: f64, radius_m: (f64, f64)) {
         let radius = rng.range(radius_m.0, radius_m.1) / self.params.gsd;
         let clear = block.buildings.iter().all(|b| {
-            p < b.p0 - radius * 0.5 || p > b.p1 + radius * 0.5 || q < b.q0 - radius * 0.5 || q > b.q1 + radius * 0.5
+            p < b.p0 - radius * 0.5
+                || p > b.p1 + radius * 0.5
+                || q < b.q0 - radius * 0.5
+                || q > b.q1 + radius * 0.5
         });
         if clear {
             let (x, y) = self.to_ground(p, q);
@@ -410,7 +436,9 @@ impl Scene {
         let seed = self.params.seed;
         let fine = fbm(seed ^ 0xF1E, x / 3.0, y / 3.0, 3) as f32;
         let tex = |scale: f64| fbm(seed ^ 0x7E7, x / scale, y / scale, 3) as f32;
-        let vary = |c: [f32; 3], t: f32, amount: f32| c.map(|v| (v * (1.0 - amount / 2.0 + amount * t)).clamp(0.0, 1.0));
+        let vary = |c: [f32; 3], t: f32, amount: f32| {
+            c.map(|v| (v * (1.0 - amount / 2.0 + amount * t)).clamp(0.0, 1.0))
+        };
 
         // Water first: rivers and ponds are flat.
         if let Some(r) = &self.river {
@@ -431,7 +459,10 @@ impl Scene {
         let dx = self.terrain_m(x + h, y) - self.terrain_m(x - h, y);
         let dy = self.terrain_m(x, y + h) - self.terrain_m(x, y - h);
         let gn = {
-            let (gx, gy) = (dx / (2.0 * h * self.params.gsd), dy / (2.0 * h * self.params.gsd));
+            let (gx, gy) = (
+                dx / (2.0 * h * self.params.gsd),
+                dy / (2.0 * h * self.params.gsd),
+            );
             let n = (gx * gx + gy * gy + 1.0).sqrt();
             [(-gx / n) as f32, (-gy / n) as f32, (1.0 / n) as f32]
         };
@@ -474,7 +505,11 @@ impl Scene {
             match block.kind {
                 BlockKind::Residential | BlockKind::Park => {
                     best.class = class::RANGELAND;
-                    best.albedo = vary([0.20, 0.33, 0.13], (0.6 * tex(8.0) + 0.4 * fine).min(1.0), 0.7);
+                    best.albedo = vary(
+                        [0.20, 0.33, 0.13],
+                        (0.6 * tex(8.0) + 0.4 * fine).min(1.0),
+                        0.7,
+                    );
                     best.texture = tex(8.0);
                 }
                 BlockKind::Commercial => {
@@ -490,7 +525,11 @@ impl Scene {
                 BlockKind::Field => {
                     let rows = (lp * 0.9).sin() * 0.5 + 0.5;
                     best.class = class::AGRICULTURE;
-                    best.albedo = vary([0.40, 0.42, 0.20], (0.5 * rows as f32 + 0.5 * fine).min(1.0), 0.6);
+                    best.albedo = vary(
+                        [0.40, 0.42, 0.20],
+                        (0.5 * rows as f32 + 0.5 * fine).min(1.0),
+                        0.6,
+                    );
                     best.texture = rows as f32;
                 }
                 BlockKind::Bare => {}
@@ -500,7 +539,9 @@ impl Scene {
                     let (roof_m, dp, dq) = b.roof_height(p, q);
                     let z = (b.base_m + roof_m) as f32;
                     if z > best.height {
-                        let shingles = (unit(hash2(b.id, (p * 2.0) as i64, (q * 2.0) as i64)) as f32) * 0.5 + 0.5 * fine;
+                        let shingles =
+                            (unit(hash2(b.id, (p * 2.0) as i64, (q * 2.0) as i64)) as f32) * 0.5
+                                + 0.5 * fine;
                         best = Surface {
                             height: z,
                             class: class::BUILDING,
@@ -521,7 +562,8 @@ impl Scene {
                     if z > best.height {
                         let slope = t.crown_m / (self.params.gsd * t.radius);
                         let (ux, uy) = self.to_ground_dir(p - t.p, q - t.q);
-                        let s = (r2.sqrt() / (1.0 - r2).sqrt().max(0.2)).min(3.0) * slope / t.radius.max(1.0);
+                        let s = (r2.sqrt() / (1.0 - r2).sqrt().max(0.2)).min(3.0) * slope
+                            / t.radius.max(1.0);
                         let (gx, gy) = (-ux * s, -uy * s);
                         let n = (gx * gx + gy * gy + 1.0).sqrt();
                         best = Surface {
@@ -584,7 +626,16 @@ mod tests {
     use super::*;
 
     fn scene(seed: u64) -> Scene {
-        Scene::new(SceneParams { seed, ..Default::default() }, 0.0, 400.0, 0.0, 400.0)
+        Scene::new(
+            SceneParams {
+                seed,
+                ..Default::default()
+            },
+            0.0,
+            400.0,
+            0.0,
+            400.0,
+        )
     }
 
     #[test]
@@ -601,7 +652,13 @@ mod tests {
                 }
             }
         }
-        for c in [class::ROAD, class::TREE, class::BUILDING, class::RANGELAND, class::DEVELOPED] {
+        for c in [
+            class::ROAD,
+            class::TREE,
+            class::BUILDING,
+            class::RANGELAND,
+            class::DEVELOPED,
+        ] {
             assert!(seen[c as usize] > 0, "class {c} never generated: {seen:?}");
         }
     }

@@ -23,7 +23,10 @@ fn disparity_follows_altitude_exactly() {
     }
     let (lo, hi) = w.disparity_range();
     let (dmin, dmax) = w.disparity.finite_range().unwrap();
-    assert!(lo as f32 <= dmin && dmax <= hi as f32, "range {lo}..{hi} vs {dmin}..{dmax}");
+    assert!(
+        lo as f32 <= dmin && dmax <= hi as f32,
+        "range {lo}..{hi} vs {dmin}..{dmax}"
+    );
 }
 
 /// Warping the right image by the true disparity reproduces the left image on jointly visible pixels
@@ -36,7 +39,8 @@ fn right_image_warped_by_truth_matches_left() {
     let (mut err, mut n) = (0.0f64, 0usize);
     for y in 0..height {
         for x in 2..width - 2 {
-            let near_edge = (x - 2..=x + 2).any(|k| (d.get(k, y, 0) - d.get(x, y, 0)).abs() > 0.3 || w.occluded.get(k, y));
+            let near_edge = (x - 2..=x + 2)
+                .any(|k| (d.get(k, y, 0) - d.get(x, y, 0)).abs() > 0.3 || w.occluded.get(k, y));
             if near_edge {
                 continue;
             }
@@ -79,7 +83,10 @@ fn occlusions_sit_beside_tall_objects() {
             }
         }
     }
-    assert!(explained as f64 >= 0.95 * total as f64, "{explained}/{total}");
+    assert!(
+        explained as f64 >= 0.95 * total as f64,
+        "{explained}/{total}"
+    );
 }
 
 #[test]
@@ -90,7 +97,11 @@ fn classes_cover_an_urban_scene() {
         counts[c as usize] += 1;
     }
     for c in [class::BUILDING, class::ROAD, class::TREE] {
-        assert!(counts[c as usize] > 200, "class {} too rare: {counts:?}", class::NAMES[c as usize]);
+        assert!(
+            counts[c as usize] > 200,
+            "class {} too rare: {counts:?}",
+            class::NAMES[c as usize]
+        );
     }
     assert_eq!(counts[class::BACKGROUND as usize], 0);
 }

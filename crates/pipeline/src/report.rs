@@ -1,0 +1,160 @@
+//! A small self-contained HTML report: headings, figures, tables and SVG histograms. Images are
+//! referenced by relative path so the report folder can be moved or zipped as a whole.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+
+/// An HTML page built section by section.
+pub struct Report {
+    title: String,
+    body: String,
+}
+
+/// Escapes text for HTML.
+pub fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+impl Report {
+    pub fn new(title: &str) -> Self {
+        Report {
+            title: title.to_string(),
+            body: String::new(),
+        }
+    }
+
+    pub fn heading(&mut self, text: &str) -> &mut Self {
+        let _ = writeln!(self.body, "<h2>{}</h2>", escape(text));
+        self
+    }
+
+    pub fn paragraph(&mut self, text: &str) -> &mut Self {
+        let _ = writeln!(self.body, "<p>{}</p>", escape(text));
+        self
+    }
+
+    /// A row of images (relative paths) with captions.
+    pub fn figures(&mut self, items: &[(&str, &str)]) -> &mut Self {
+        self.body.push_str("<div class=\"row\">\n");
+        for (src, caption) in items {
+            let _ = writeln!(
+                self.body,
+                "<figure><img src=\"{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
+                escape(src),
+                c = escape(caption)
+            );
+        }
+        self.body.push_str("</div>\n");
+        self
+    }
+
+    /// A table with a header row.
+    pub fn table(&mut self, header: &[&str], rows: &[Vec<String>]) -> &mut Self {
+        self.body.push_str("<table>\n<tr>");
+        for h in header {
+            let _ = write!(self.body, "<th>{}</th>", escape(h));
+        }
+        self.body.push_str("</tr>\n");
+        for row in rows {
+            self.body.push_str("<tr>");
+            for cell in row {
+                let _ = write!(self.body, "<td>{}</td>", escape(cell));
+            }
+            self.body.push_str("</tr>\n");
+        }
+        self.body.push_str("</table>\n");
+        self
+    }
+
+    /// A histogram of `values` over [0, max] in `bins` bins, the last bin collecting everything above.
+    pub fn histogram(&mut self, values: &[f32], max: f32, bins: usize, x_label: &str) -> &mut Self {
+        self.body
+            .push_str(&svg_histogram(values, max, bins, x_label));
+        self
+    }
+
+    /// Writes the page atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let html = format!(
+            "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{t}</title>\n<style>{STYLE}</style></head>\n<body><h1>{t}</h1>\n{}</body></html>\n",
+            self.body,
+            t = escape(&self.title)
+        );
+        raster::formats::write_atomically(path, |f| std::io::Write::write_all(f, html.as_bytes()))
+            .with_context(|| format!("writing the report {}", path.display()))
+    }
+}
+
+const STYLE: &str = "body{font-family:sans-serif;max-width:1400px;margin:2em auto;color:#222}\
+.row{display:flex;flex-wrap:wrap;gap:12px}figure{margin:0}img{width:320px;image-rendering:pixelated;border:1px solid #ccc}\
+figcaption{font-size:90%;text-align:center}table{border-collapse:collapse;margin:1em 0}\
+td,th{border:1px solid #bbb;padding:4px 10px;text-align:right}th{background:#eee}";
+
+fn svg_histogram(values: &[f32], max: f32, bins: usize, x_label: &str) -> String {
+    let bins = bins.max(1);
+    let mut counts = vec![0usize; bins];
+    for &v in values.iter().filter(|v| v.is_finite()) {
+        let i = if max > 0.0 {
+            ((v / max) * bins as f32) as usize
+        } else {
+            bins - 1
+        };
+        counts[i.min(bins - 1)] += 1;
+    }
+    let total = counts.iter().sum::<usize>().max(1);
+    let peak = *counts.iter().max().unwrap_or(&1).max(&1) as f64;
+    let (w, h, left, bottom) = (600.0, 220.0, 50.0, 40.0);
+    let bar = (w - left - 10.0) / bins as f64;
+    let mut svg =
+        format!("<svg width=\"{w}\" height=\"{h}\" xmlns=\"http://www.w3.org/2000/svg\">\n");
+    for (i, &c) in counts.iter().enumerate() {
+        let bh = (h - bottom - 10.0) * c as f64 / peak;
+        let _ = writeln!(
+            svg,
+            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#4a7bd0\"><title>{:.1}%</title></rect>",
+            left + i as f64 * bar,
+            h - bottom - bh,
+            (bar - 1.0).max(0.5),
+            bh,
+            100.0 * c as f64 / total as f64
+        );
+    }
+    let _ = writeln!(
+        svg,
+        "<line x1=\"{left}\" y1=\"{y}\" x2=\"{x2}\" y2=\"{y}\" stroke=\"#222\"/>\
+<text x=\"{left}\" y=\"{t}\" font-size=\"12\">0</text><text x=\"{x2}\" y=\"{t}\" font-size=\"12\" text-anchor=\"end\">≥{max}</text>\
+<text x=\"{mid}\" y=\"{t}\" font-size=\"12\" text-anchor=\"middle\">{}</text>\
+<text x=\"10\" y=\"20\" font-size=\"12\">share of pixels (peak {:.1}%)</text></svg>",
+        escape(x_label),
+        100.0 * peak / total as f64,
+        y = h - bottom,
+        x2 = w - 10.0,
+        t = h - bottom + 20.0,
+        mid = (left + w - 10.0) / 2.0,
+    );
+    svg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn report_escapes_and_counts() {
+        let mut r = Report::new("a <b>");
+        r.table(&["k"], &[vec!["x&y".into()]])
+            .histogram(&[0.1, 0.2, 5.0, f32::NAN], 1.0, 4, "err");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.html");
+        r.write(&path).unwrap();
+        let html = std::fs::read_to_string(path).unwrap();
+        assert!(html.contains("a &lt;b&gt;") && html.contains("x&amp;y"));
+        // 0.1 and 0.2 fall in the first bin (2 of 3 finite values), 5.0 in the last.
+        assert!(html.contains("<title>66.7%</title>") && html.contains("<title>33.3%</title>"));
+    }
+}

@@ -1,0 +1,160 @@
+//! Writes a procedural world in the public release's folder layout, so every stage reads it exactly
+//! like real data:
+//!
+//! ```text
+//! L/<stem>.iio  R/<stem>.iio        rectified images, NPY float32 (H, W, 3), 0–255
+//! homography/<stem>.npz             Hleft, Hright (raw → rectified), float64 3×3
+//! disparity/<stem>.iio              true disparity of the left view, x_R = x_L − d (every pixel)
+//! occlusion/<stem>.png              255 where the left pixel is not visible in the right view
+//! height/<stem>.iio                 altitude (m) of the surface seen by each left pixel
+//! classes/<ID>.png                  OpenEarthMap class ids of each view (8-bit)
+//! rpc/<ID>.json                     the raw camera as a degree-1 RPC (SatNeRF/rpcm JSON)
+//! world.json                        the parameters, disparity range and appearance model
+//! ```
+//! with `<stem>` = `<LEFTID>-<RIGHTID>`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use raster::formats::{write_atomically, write_homographies, write_npy, write_png, PngDepth};
+use serde_json::json;
+use world::World;
+
+/// The files of one rectified pair in the release layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairPaths {
+    pub stem: String,
+    pub left: PathBuf,
+    pub right: PathBuf,
+    pub homography: PathBuf,
+    pub disparity: PathBuf,
+}
+
+impl PairPaths {
+    /// Paths of pair `stem` under the dataset folder `root`.
+    pub fn new(root: &Path, stem: &str) -> Self {
+        let file = |dir: &str, ext: &str| root.join(dir).join(format!("{stem}.{ext}"));
+        PairPaths {
+            stem: stem.to_string(),
+            left: file("L", "iio"),
+            right: file("R", "iio"),
+            homography: file("homography", "npz"),
+            disparity: file("disparity", "iio"),
+        }
+    }
+}
+
+/// Image ids of a world named `name`: `<name>_A` (left) and `<name>_B` (right).
+pub fn image_ids(name: &str) -> Result<(String, String)> {
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        bail!("world name {name:?} must be non-empty ASCII letters, digits and '_' (a '-' would split the pair stem)");
+    }
+    Ok((format!("{name}_A"), format!("{name}_B")))
+}
+
+/// Writes `world` under `root` as pair `<name>_A-<name>_B`; returns its paths.
+pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
+    let (left_id, right_id) = image_ids(name)?;
+    let stem = format!("{left_id}-{right_id}");
+    let paths = PairPaths::new(root, &stem);
+    let (w, h) = world.disparity.size();
+    write_npy(&paths.left, &world.left.image)?;
+    write_npy(&paths.right, &world.right.image)?;
+    write_homographies(&paths.homography, &world.rectify_left, &world.rectify_right)?;
+    write_npy(&paths.disparity, &world.disparity)?;
+    write_npy(
+        root.join("height").join(format!("{stem}.iio")),
+        &world.left.height,
+    )?;
+    write_png(
+        root.join("occlusion").join(format!("{stem}.png")),
+        &mask_picture(&world.occluded),
+        PngDepth::Eight,
+    )?;
+
+    let geo = &world.geo;
+    let (lon_c, lat_c) = geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
+    let (lon_0, lat_0) = geo.lonlat(0.0, 0.0);
+    let half = ((lon_c - lon_0).abs() * 1.2, (lat_c - lat_0).abs() * 1.2);
+    let (d_lo, d_hi) = world.disparity_range();
+    let alt_range = (
+        -1.0,
+        world.params.scene.relief_m + world::scene::MAX_OBJECT_HEIGHT_M + 1.0,
+    );
+    for (id, view, camera) in [
+        (&left_id, &world.left, &world.camera_left),
+        (&right_id, &world.right, &world.camera_right),
+    ] {
+        write_png(
+            root.join("classes").join(format!("{id}.png")),
+            &view.classes,
+            PngDepth::Eight,
+        )?;
+        let json = camera.to_satnerf_json(id, w, h, (lon_c, lat_c), half, alt_range);
+        write_json(&root.join("rpc").join(format!("{id}.json")), &json)?;
+    }
+    let p = &world.params;
+    let meta = json!({
+        "generator": "seasonstereo world",
+        "pair": stem,
+        "width": w, "height": h,
+        "seed": p.scene.seed,
+        "gsd_m": p.scene.gsd,
+        "disparity_per_metre": p.left.slope - p.right.slope,
+        "disparity_at_altitude_0": p.disparity_at(0.0),
+        "disparity_range": [d_lo, d_hi],
+        "sun_elevation_deg": p.sun_elevation_deg,
+        "sun_azimuth_deg": p.sun_azimuth_deg,
+        "appearance": world.appearance,
+        "occluded_fraction": world.occluded.count() as f64 / (w * h) as f64,
+        "note": "raw images are not rendered: the rectified pair, the homographies and the RPCs define the geometry",
+    });
+    write_json(&root.join("world.json"), &meta)?;
+    Ok(paths)
+}
+
+/// A mask as an 8-bit picture: 255 where true, 0 elsewhere.
+pub fn mask_picture(mask: &raster::Mask) -> raster::Image {
+    let data = mask
+        .data()
+        .iter()
+        .map(|&v| if v { 255.0 } else { 0.0 })
+        .collect();
+    raster::Image::new(mask.width(), mask.height(), 1, data).expect("sizes match")
+}
+
+/// Writes pretty JSON atomically.
+pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    write_atomically(path, |f| std::io::Write::write_all(f, text.as_bytes()))
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_the_release_layout_and_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let world =
+            world::generate(&world::WorldParams::new(64, 2), &world::Neutral, &|_, _| {}).unwrap();
+        let paths = save_world(&world, dir.path(), "W1").unwrap();
+        assert_eq!(paths.stem, "W1_A-W1_B");
+        assert_eq!(raster::read_image(&paths.left).unwrap(), world.left.image);
+        assert_eq!(
+            raster::read_image(&paths.disparity).unwrap(),
+            world.disparity
+        );
+        let (hl, hr) = raster::formats::read_homographies(&paths.homography).unwrap();
+        assert_eq!((hl, hr), (world.rectify_left, world.rectify_right));
+        let classes = raster::read_image(dir.path().join("classes/W1_A.png")).unwrap();
+        assert_eq!(classes, world.left.classes);
+        let rpc: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("rpc/W1_B.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(rpc["rpc"]["col_num"].as_array().unwrap().len(), 20);
+        assert!(image_ids("bad-name").is_err());
+    }
+}
