@@ -13,6 +13,7 @@ pub mod geometry;
 pub mod ssim;
 
 pub use error::RasterError;
+pub use formats::{read_image, write_image};
 pub use geometry::Homography;
 pub use image::{Image, Mask};
 

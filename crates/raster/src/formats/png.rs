@@ -1,0 +1,119 @@
+//! PNG images: 8- or 16-bit grey, grey+alpha, RGB or RGBA (palettes and low bit depths expanded),
+//! values kept in their native units (0–255 or 0–65535).
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use png::{BitDepth, ColorType, Decoder, Encoder, Transformations};
+
+use super::{alloc_samples, checked_samples, no_panic, write_atomically};
+use crate::{Image, RasterError, Result};
+
+/// Bit depth of a written PNG.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PngDepth {
+    /// Values rounded and clamped to 0–255.
+    Eight,
+    /// Values rounded and clamped to 0–65535.
+    Sixteen,
+}
+
+/// Reads a PNG (first frame of an APNG).
+pub fn read_png(path: impl AsRef<Path>) -> Result<Image> {
+    let path = path.as_ref();
+    let file = File::open(path).map_err(|e| RasterError::io(path, e))?;
+    let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let err = |m: String| RasterError::format(path, m);
+    no_panic(path, "PNG", || {
+        let mut decoder = Decoder::new_with_limits(
+            BufReader::new(file),
+            png::Limits {
+                bytes: usize::MAX / 2,
+            },
+        );
+        decoder.set_transformations(Transformations::EXPAND);
+        let mut reader = decoder
+            .read_info()
+            .map_err(|e| err(format!("not a readable PNG: {e}")))?;
+        let (color, depth) = reader.output_color_type();
+        let (w, h) = reader.info().size();
+        let c = color.samples() as u64;
+        // Deflate expands at most ~1032:1: a header promising more pixels than that is corrupt.
+        let max = file_len.saturating_mul(1100).saturating_add(1 << 20);
+        checked_samples(path, w as u64, h as u64, c, max)?;
+        let mut buf = vec![0u8; reader.output_buffer_size()];
+        let info = reader
+            .next_frame(&mut buf)
+            .map_err(|e| err(format!("corrupt PNG data: {e}")))?;
+        let bytes = &buf[..info.buffer_size()];
+        let n = (w as usize) * (h as usize) * c as usize;
+        let mut data = alloc_samples(path, n, 0.0)?;
+        let line = info.line_size;
+        let row = w as usize * c as usize;
+        for y in 0..h as usize {
+            let src = &bytes[y * line..];
+            let dst = &mut data[y * row..(y + 1) * row];
+            match depth {
+                BitDepth::Sixteen => {
+                    for (d, b) in dst.iter_mut().zip(src.chunks_exact(2)) {
+                        *d = u16::from_be_bytes([b[0], b[1]]) as f32;
+                    }
+                }
+                BitDepth::Eight => {
+                    for (d, &b) in dst.iter_mut().zip(src) {
+                        *d = b as f32;
+                    }
+                }
+                other => return Err(err(format!("unexpected PNG bit depth {other:?}"))),
+            }
+        }
+        Image::new(w as usize, h as usize, c as usize, data).map_err(|e| err(e.to_string()))
+    })
+}
+
+/// Writes a 1- (grey), 2- (grey+alpha), 3- (RGB) or 4-channel (RGBA) image; values are rounded
+/// and clamped to the depth's range, NaN written as 0.
+pub fn write_png(path: impl AsRef<Path>, image: &Image, depth: PngDepth) -> Result<()> {
+    let path = path.as_ref();
+    let color = match image.channels() {
+        1 => ColorType::Grayscale,
+        2 => ColorType::GrayscaleAlpha,
+        3 => ColorType::Rgb,
+        4 => ColorType::Rgba,
+        c => {
+            return Err(RasterError::Shape(format!(
+                "{}: PNG stores 1 to 4 channels, the image has {c}",
+                path.display()
+            )))
+        }
+    };
+    let (w, h) = (u32::try_from(image.width()), u32::try_from(image.height()));
+    let (Ok(w), Ok(h)) = (w, h) else {
+        return Err(RasterError::Shape(format!(
+            "{}: image too large for PNG",
+            path.display()
+        )));
+    };
+    let bytes: Vec<u8> = match depth {
+        // `as` saturates and maps NaN to 0.
+        PngDepth::Eight => image.data().iter().map(|v| v.round() as u8).collect(),
+        PngDepth::Sixteen => image
+            .data()
+            .iter()
+            .flat_map(|v| (v.round() as u16).to_be_bytes())
+            .collect(),
+    };
+    write_atomically(path, |file| {
+        let mut enc = Encoder::new(file, w, h);
+        enc.set_color(color);
+        enc.set_depth(match depth {
+            PngDepth::Eight => BitDepth::Eight,
+            PngDepth::Sixteen => BitDepth::Sixteen,
+        });
+        let mut writer = enc.write_header()?;
+        writer.write_image_data(&bytes)?;
+        writer.finish()?;
+        Ok(())
+    })
+}
