@@ -1,0 +1,365 @@
+//! The public matcher: parameters, memory accounting and the pipeline
+//! grey → census → cost volume → aggregation → selection → median.
+
+use crate::aggregate::{aggregate, Dims, Penalties, Progress};
+use crate::census::{census_transform, CensusWindow};
+use crate::cost::build_cost_volume;
+use crate::error::MatchError;
+use crate::select::{median3x3, select, Selection, Subpixel};
+use raster::Image;
+use rayon::prelude::*;
+use std::collections::TryReserveError;
+
+/// Which aggregation paths SGM uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Paths {
+    /// Horizontal and vertical, both senses: faster, more streaking.
+    Four,
+    /// Horizontal, vertical and both diagonals, both senses (Hirschmüller's default).
+    #[default]
+    Eight,
+}
+
+impl Paths {
+    fn count(self) -> usize {
+        match self {
+            Paths::Four => 4,
+            Paths::Eight => 8,
+        }
+    }
+}
+
+/// Parameters of [`match_pair`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SgmParams {
+    /// Smallest disparity tested (may be negative).
+    pub d_min: i32,
+    /// Largest disparity tested, **inclusive**: `d_max − d_min + 1` disparities.
+    pub d_max: i32,
+    /// Penalty of a ±1 disparity change between neighbours, in census bits.
+    pub p1: u16,
+    /// Penalty of a larger jump, in census bits (`P1 < P2 ≤ 4000`).
+    pub p2: u16,
+    /// Gradient adaptation of `P2`: `Some(k)` uses `P2' = max(P1 + 1, P2 / (1 + |ΔI| / k))` where
+    /// `ΔI` is the grey difference between the pixel and its predecessor on the path, in units of
+    /// the left image's robust range (1st–99th percentile), so it does not depend on the value
+    /// range of the input. Disparity jumps become cheap across intensity edges (building
+    /// outlines). `None`: constant `P2`.
+    pub p2_adaptive: Option<f32>,
+    /// Census window.
+    pub census: CensusWindow,
+    /// Aggregation paths.
+    pub paths: Paths,
+    /// Left–right consistency: a disparity is kept when the right view's winner at `x − d`
+    /// agrees within this many pixels. `None`: no check.
+    pub lr_tolerance: Option<f32>,
+    /// Uniqueness ratio `u`: the best aggregated cost must be below `(1 − u)` times the best cost
+    /// more than one disparity away. `None`: no test.
+    pub uniqueness: Option<f32>,
+    /// Sub-pixel refinement: equiangular (symmetric V) fit on the aggregated costs of the
+    /// winner and its two neighbours; it suits census costs (V-shaped, not quadratic) and is
+    /// less biased towards integers than a parabola.
+    pub subpixel: bool,
+    /// NaN-aware 3×3 median of the result.
+    pub median: bool,
+    /// Refuse to match (with [`MatchError::TooLarge`]) when [`memory_bytes`] exceeds this.
+    pub max_memory: Option<usize>,
+}
+
+impl Default for SgmParams {
+    /// Tuned for satellite-like images with sharp building edges (on the procedural world and the
+    /// synthetic tests): 9×7 census, `P1 = 16`, `P2 = 200` adapted to the gradient (`k = 0.02`:
+    /// a jump costs `P2 / 3` across an edge of 4 % of the image's range, `P1 + 1` across strong
+    /// edges), 8 paths, left–right tolerance 1 px, uniqueness 0.02, equiangular sub-pixel fit,
+    /// median on. The default range `[0, 63]` is a placeholder: set yours with
+    /// [`SgmParams::with_range`] or [`crate::estimate_range`].
+    fn default() -> Self {
+        Self {
+            d_min: 0,
+            d_max: 63,
+            p1: 16,
+            p2: 200,
+            p2_adaptive: Some(0.02),
+            census: CensusWindow::default(),
+            paths: Paths::Eight,
+            lr_tolerance: Some(1.0),
+            uniqueness: Some(0.02),
+            subpixel: true,
+            median: true,
+            max_memory: None,
+        }
+    }
+}
+
+impl SgmParams {
+    /// Default parameters with the inclusive range `[d_min, d_max]`.
+    pub fn with_range(d_min: i32, d_max: i32) -> Self {
+        Self {
+            d_min,
+            d_max,
+            ..Self::default()
+        }
+    }
+
+    /// Number of disparities tested, `None` when the range is empty.
+    pub fn n_disp(&self) -> Option<usize> {
+        let n = i64::from(self.d_max) - i64::from(self.d_min) + 1;
+        (n > 0).then_some(n as usize)
+    }
+
+    fn validate(&self) -> Result<usize, MatchError> {
+        let n = self.n_disp().ok_or(MatchError::EmptyRange {
+            d_min: self.d_min,
+            d_max: self.d_max,
+        })?;
+        if n > usize::from(u16::MAX) {
+            return Err(MatchError::InvalidParams(format!(
+                "at most 65535 disparities, got {n}"
+            )));
+        }
+        if !self.census.is_valid() {
+            return Err(MatchError::InvalidParams(format!(
+                "census window {}x{} must have odd sides and at most 64 bits",
+                self.census.width, self.census.height
+            )));
+        }
+        if self.p1 == 0 || self.p2 <= self.p1 || self.p2 > 4000 {
+            return Err(MatchError::InvalidParams(format!(
+                "penalties need 0 < P1 < P2 <= 4000 (got P1 = {}, P2 = {})",
+                self.p1, self.p2
+            )));
+        }
+        if let Some(k) = self.p2_adaptive {
+            if !(k > 0.0 && k.is_finite()) {
+                return Err(MatchError::InvalidParams(format!(
+                    "P2 adaptation constant must be positive, got {k}"
+                )));
+            }
+        }
+        if let Some(t) = self.lr_tolerance {
+            if t.is_nan() || t < 0.0 {
+                return Err(MatchError::InvalidParams(format!(
+                    "left-right tolerance must be >= 0, got {t}"
+                )));
+            }
+        }
+        if let Some(u) = self.uniqueness {
+            if !(0.0..1.0).contains(&u) {
+                return Err(MatchError::InvalidParams(format!(
+                    "uniqueness ratio must be in [0, 1), got {u}"
+                )));
+            }
+        }
+        Ok(n)
+    }
+}
+
+/// Peak bytes [`match_pair`] allocates for a `width × height` pair and `n_disp` disparities: the
+/// cost volume (`u8`) and the aggregated volume (`u16`), i.e. **3 bytes per pixel per
+/// disparity**, plus 32 bytes per pixel (grey images, census codes and validity, the normalised
+/// grey of the adaptive `P2`) and the two vertical-sweep line buffers (`2 · 3 · width ·
+/// (n_disp + 2)` `u16`). The input images and the returned map are not counted.
+pub fn memory_bytes(width: usize, height: usize, n_disp: usize) -> usize {
+    let px = width.saturating_mul(height);
+    let volume = px.saturating_mul(n_disp).saturating_mul(3);
+    let per_pixel = px.saturating_mul(32);
+    let lines = width.saturating_mul(n_disp + 2).saturating_mul(2 * 3 * 2);
+    volume.saturating_add(per_pixel).saturating_add(lines)
+}
+
+/// Disparity map of the left view of a rectified pair (single channel, NaN where invalid).
+///
+/// Images of any channel count are converted to grey ([`Image::to_gray`]); they must have the same
+/// size. NaN input pixels are invalid: the output is NaN there (and where the match lands on a NaN
+/// right pixel).
+pub fn match_pair(left: &Image, right: &Image, params: &SgmParams) -> Result<Image, MatchError> {
+    match_pair_with_progress(left, right, params, None)
+}
+
+/// [`match_pair`] with a progress callback, called as `(done, total)` from any thread (about
+/// `5 · height` steps in all).
+pub fn match_pair_with_progress(
+    left: &Image,
+    right: &Image,
+    params: &SgmParams,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<Image, MatchError> {
+    if left.size() != right.size() {
+        return Err(MatchError::SizeMismatch {
+            left: left.size(),
+            right: right.size(),
+        });
+    }
+    let (w, h) = left.size();
+    if w == 0 || h == 0 {
+        return Err(MatchError::EmptyImage(w, h));
+    }
+    let lg = left.to_gray();
+    let rg = right.to_gray();
+    let disp = match_grey(lg.data(), rg.data(), w, h, params, progress)?;
+    Ok(Image::new(w, h, 1, disp).expect("sizes match"))
+}
+
+/// Estimates the range with [`crate::estimate_range`], then matches with it. Returns the map and
+/// the range used.
+pub fn match_pair_auto(
+    left: &Image,
+    right: &Image,
+    params: &SgmParams,
+) -> Result<(Image, (i32, i32)), MatchError> {
+    let (d_min, d_max) = crate::estimate_range(left, right)?;
+    let p = SgmParams {
+        d_min,
+        d_max,
+        ..params.clone()
+    };
+    Ok((match_pair(left, right, &p)?, (d_min, d_max)))
+}
+
+/// The whole pipeline on grey, row-major buffers of `w × h`.
+pub(crate) fn match_grey(
+    lg: &[f32],
+    rg: &[f32],
+    w: usize,
+    h: usize,
+    params: &SgmParams,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<Vec<f32>, MatchError> {
+    let n = params.validate()?;
+    let needed = memory_bytes(w, h, n);
+    if let Some(limit) = params.max_memory {
+        if needed > limit {
+            return Err(MatchError::TooLarge { needed, limit });
+        }
+    }
+    let vol_len = w
+        .checked_mul(h)
+        .and_then(|v| v.checked_mul(n))
+        .ok_or(MatchError::TooLarge {
+            needed,
+            limit: isize::MAX as usize,
+        })?;
+    let too_large = |_| MatchError::OutOfMemory { needed };
+    // Both volumes up front, so an impossible request fails before any work.
+    let mut cost: Vec<u8> = zeroed(vol_len).map_err(too_large)?;
+    let mut sum: Vec<u16> = zeroed(vol_len).map_err(too_large)?;
+
+    let steps = 4 * h + if params.median { h } else { 0 };
+    let progress = Progress::new(steps, progress);
+    let tick = || progress.tick();
+
+    let lc = census_transform(lg, w, h, params.census);
+    let rc = census_transform(rg, w, h, params.census);
+    build_cost_volume(
+        &lc,
+        &rc,
+        params.d_min,
+        n,
+        (params.census.bits() / 2) as u8,
+        &mut cost,
+    );
+    drop(lc.codes);
+    drop(rc.codes);
+
+    let norm;
+    let adapt = match params.p2_adaptive {
+        Some(k) => {
+            norm = normalised(lg);
+            Some((&norm[..], k))
+        }
+        None => None,
+    };
+    let pen = Penalties {
+        p1: params.p1,
+        p2: params.p2,
+        adapt,
+    };
+    let dims = Dims {
+        width: w,
+        height: h,
+        n_disp: n,
+    };
+    aggregate(
+        &cost,
+        &mut sum,
+        dims,
+        &pen,
+        params.paths == Paths::Eight,
+        &tick,
+    );
+    debug_assert!(params.paths.count() * (64 + params.p2 as usize) < 65536);
+    drop(cost);
+
+    let sel = Selection {
+        d_min: params.d_min,
+        lr_tolerance: params.lr_tolerance,
+        uniqueness: params.uniqueness,
+        subpixel: if params.subpixel {
+            Subpixel::Equiangular
+        } else {
+            Subpixel::None
+        },
+    };
+    let mut disp = select(&sum, dims, &lc.valid, &rc.valid, &sel, &tick);
+    drop(sum);
+    if params.median {
+        disp = median3x3(&disp, w, h);
+        for _ in 0..h {
+            tick();
+        }
+    }
+    // The sub-pixel fit and the median may move a match by a pixel: check again that it lands
+    // inside the right image, on a valid pixel.
+    disp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, d) in row.iter_mut().enumerate() {
+            let xr = (x as f32 - *d).round();
+            if !(xr >= 0.0 && xr < w as f32 && rc.valid[y * w + xr as usize]) {
+                *d = f32::NAN;
+            }
+        }
+    });
+    Ok(disp)
+}
+
+/// A zeroed vector of `len` elements, or an error when it cannot be allocated. The zeroing (and
+/// so the first touch of the pages) is spread over the threads.
+fn zeroed<T: Copy + Default + Send>(len: usize) -> Result<Vec<T>, TryReserveError> {
+    let mut v: Vec<T> = Vec::new();
+    v.try_reserve_exact(len)?;
+    v.spare_capacity_mut()[..len]
+        .par_chunks_mut(1 << 16)
+        .for_each(|c| {
+            for e in c {
+                e.write(T::default());
+            }
+        });
+    // SAFETY: the capacity is at least `len` and the first `len` elements were initialised above.
+    unsafe { v.set_len(len) };
+    Ok(v)
+}
+
+/// `grey` divided by its robust range (1st to 99th percentile of the finite values, from a
+/// sample), so gradient thresholds do not depend on the input's value range.
+fn normalised(grey: &[f32]) -> Vec<f32> {
+    let step = (grey.len() / 65536).max(1);
+    let mut sample: Vec<f32> = grey
+        .iter()
+        .step_by(step)
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let scale = if sample.len() < 2 {
+        1.0
+    } else {
+        sample.sort_unstable_by(f32::total_cmp);
+        let lo = sample[sample.len() / 100];
+        let hi = sample[(sample.len() * 99) / 100];
+        let r = hi - lo;
+        if r > 0.0 && r.is_finite() {
+            r
+        } else {
+            1.0
+        }
+    };
+    grey.iter().map(|v| v / scale).collect()
+}
