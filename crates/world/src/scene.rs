@@ -455,24 +455,22 @@ impl Scene {
         }
 
         let ground_m = self.terrain_m(x, y);
+        // Forward differences: the terrain is smooth at the scale of a pixel.
         let h = 0.5;
-        let dx = self.terrain_m(x + h, y) - self.terrain_m(x - h, y);
-        let dy = self.terrain_m(x, y + h) - self.terrain_m(x, y - h);
+        let gx = (self.terrain_m(x + h, y) - ground_m) / (h * self.params.gsd);
+        let gy = (self.terrain_m(x, y + h) - ground_m) / (h * self.params.gsd);
         let gn = {
-            let (gx, gy) = (
-                dx / (2.0 * h * self.params.gsd),
-                dy / (2.0 * h * self.params.gsd),
-            );
             let n = (gx * gx + gy * gy + 1.0).sqrt();
             [(-gx / n) as f32, (-gy / n) as f32, (1.0 / n) as f32]
         };
+        let soil = tex(20.0);
         let mut best = Surface {
             height: ground_m as f32,
             class: class::BARELAND,
-            albedo: vary([0.52, 0.44, 0.34], tex(20.0), 0.5),
+            albedo: vary([0.52, 0.44, 0.34], soil, 0.5),
             facade: [0.45, 0.40, 0.33],
             normal: gn,
-            texture: tex(20.0),
+            texture: soil,
         };
 
         // Streets: roads on the grid lines, pavements beside them.
