@@ -18,16 +18,7 @@ use raster::Image;
 
 /// An inclusive range `(d_min, d_max)` that should contain the disparities of the pair.
 pub fn estimate_range(left: &Image, right: &Image) -> Result<(i32, i32), MatchError> {
-    if left.size() != right.size() {
-        return Err(MatchError::SizeMismatch {
-            left: left.size(),
-            right: right.size(),
-        });
-    }
-    let (w, h) = left.size();
-    if w == 0 || h == 0 {
-        return Err(MatchError::EmptyImage(w, h));
-    }
+    let (w, h) = crate::sgm::check_pair(left, right)?;
     let mut f = 4usize.max(w.max(h).div_ceil(512));
     while f > 1 && w.min(h) / f < 32 {
         f /= 2;

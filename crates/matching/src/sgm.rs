@@ -184,6 +184,15 @@ pub fn match_pair_with_progress(
     params: &SgmParams,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Image, MatchError> {
+    let (w, h) = check_pair(left, right)?;
+    let lg = left.to_gray();
+    let rg = right.to_gray();
+    let disp = match_grey(lg.data(), rg.data(), w, h, params, progress)?;
+    Ok(Image::new(w, h, 1, disp).expect("sizes match"))
+}
+
+/// The common size of a pair, or the error saying why it cannot be matched.
+pub(crate) fn check_pair(left: &Image, right: &Image) -> Result<(usize, usize), MatchError> {
     if left.size() != right.size() {
         return Err(MatchError::SizeMismatch {
             left: left.size(),
@@ -194,10 +203,7 @@ pub fn match_pair_with_progress(
     if w == 0 || h == 0 {
         return Err(MatchError::EmptyImage(w, h));
     }
-    let lg = left.to_gray();
-    let rg = right.to_gray();
-    let disp = match_grey(lg.data(), rg.data(), w, h, params, progress)?;
-    Ok(Image::new(w, h, 1, disp).expect("sizes match"))
+    Ok((w, h))
 }
 
 /// Estimates the range with [`crate::estimate_range`], then matches with it. Returns the map and

@@ -31,15 +31,7 @@ pub fn score_disparity(
     region: &Mask,
 ) -> Result<DisparityScores, RasterError> {
     predicted.check_same_size(truth, "predicted and true disparity")?;
-    if region.size() != truth.size() {
-        return Err(RasterError::Shape(format!(
-            "evaluation mask is {}x{}, disparity is {}x{}",
-            region.width(),
-            region.height(),
-            truth.width(),
-            truth.height()
-        )));
-    }
+    truth.check_mask(region, "true disparity and evaluation mask")?;
     let (mut evaluated, mut matched, mut abs_sum, mut sq_sum, mut bad1, mut bad2) =
         (0usize, 0usize, 0.0f64, 0.0f64, 0usize, 0usize);
     let px = predicted.channels();

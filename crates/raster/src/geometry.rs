@@ -285,15 +285,7 @@ pub fn rgb_distance(a: &Image, b: &Image) -> Result<Image> {
 /// `Ok(None)` for an empty mask, so callers cannot divide by zero by accident; NaN samples under
 /// the mask make the mean NaN (mask them out first). Sizes must match.
 pub fn masked_mean(image: &Image, mask: &Mask) -> Result<Option<f64>> {
-    if image.size() != mask.size() {
-        return Err(RasterError::Shape(format!(
-            "masked_mean: image is {}x{}, mask is {}x{}",
-            image.width(),
-            image.height(),
-            mask.width(),
-            mask.height()
-        )));
-    }
+    image.check_mask(mask, "masked_mean")?;
     let c = image.channels();
     let (sum, n) = image
         .data()

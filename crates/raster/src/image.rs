@@ -171,6 +171,20 @@ impl Image {
         Ok(())
     }
 
+    /// Fails unless `mask` covers exactly this image, with a message naming `what`.
+    pub fn check_mask(&self, mask: &Mask, what: &str) -> Result<()> {
+        if self.size() != mask.size() {
+            return Err(RasterError::Shape(format!(
+                "{what}: image is {}x{}, mask is {}x{}",
+                self.width,
+                self.height,
+                mask.width(),
+                mask.height()
+            )));
+        }
+        Ok(())
+    }
+
     /// The (min, max) of the finite samples, or `None` when there are none.
     pub fn finite_range(&self) -> Option<(f32, f32)> {
         self.data

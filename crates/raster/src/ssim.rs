@@ -192,15 +192,7 @@ pub fn ssim_gaussian_masked(
     mask: &Mask,
     data_range: f32,
 ) -> Result<Option<f64>> {
-    if mask.size() != a.size() {
-        return Err(RasterError::Shape(format!(
-            "ssim_gaussian_masked: mask is {}x{}, images are {}x{}",
-            mask.width(),
-            mask.height(),
-            a.width(),
-            a.height()
-        )));
-    }
+    a.check_mask(mask, "ssim_gaussian_masked")?;
     let maps = gaussian_maps(a, b, data_range)?;
     let n = mask.count();
     if n == 0 {
