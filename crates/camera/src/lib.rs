@@ -1,1 +1,23 @@
-//! Satellite camera geometry.
+//! Satellite camera geometry: RPC camera models, UTM coordinates, the benchmark's iterative
+//! triangulation of rectified disparities and the max-per-cell DSM rasterisation.
+//!
+//! Everything here follows the released evaluation code (rpcm's localisation, s2p's altitude
+//! iteration, floor-and-max gridding), so altitude errors computed with it are comparable to the
+//! paper's.
+
+mod error;
+
+pub mod dsm;
+pub mod rectify;
+pub mod rpc;
+pub mod triangulate;
+pub mod utm;
+
+pub use dsm::{rasterize_max, write_dsm, DsmGrid};
+pub use error::CameraError;
+pub use rpc::RpcModel;
+pub use triangulate::{altitude, evaluation_mask, triangulate_disparity, Points};
+pub use utm::UtmZone;
+
+/// Result type of this crate.
+pub type Result<T, E = CameraError> = std::result::Result<T, E>;

@@ -35,10 +35,18 @@ enum Command {
     /// Render a procedural satellite world (rectified pair, exact disparity, heights, classes,
     /// homographies and RPC cameras) in the public release's folder layout.
     World(WorldArgs),
+    /// Rectify a raw satellite pair from its RPC cameras (epipolar lines become rows) and give the
+    /// disparity search range implied by the scene's altitudes.
+    Rectify(RectifyArgs),
     /// Predict the disparity of a rectified pair.
     Predict(PredictArgs),
     /// Run the whole chain on a procedural world and write an HTML report (offline, CPU, seconds).
     Demo(DemoArgs),
+    /// Altitude MAE of the DSMs from predicted disparities, as the benchmark's code computes it
+    /// (RPC triangulation, max-per-cell DSM on the ground truth's grid, NCC registration, foliage
+    /// and water masked); prints the paper's Table 1. Resumable: pairs already in OUT/pairs.csv
+    /// are skipped.
+    Eval(EvalArgs),
 }
 
 #[derive(Args)]
@@ -62,6 +70,77 @@ struct WorldArgs {
 enum Method {
     /// Census transform + Semi-Global Matching with a left-right check.
     Sgm,
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Writes OUT/L/<stem>.iio and OUT/R/<stem>.iio (NPY float32, NaN outside the \
+    raw images), OUT/homography/<stem>.npz (Hleft, Hright: raw → rectified, flip included) and \
+    OUT/rectify.json (ranges, region, sizes). Disparity x_L − x_R is positive and grows with \
+    altitude; pass the printed range to `seasonstereo predict --range`.\n\n\
+    Example (s2p's Pléiades test pair):\n  seasonstereo rectify img_01.tif img_02.tif -o out/s2p \
+    --roi 150,150,700,700 --alt-range 2200:2450"
+)]
+struct RectifyArgs {
+    /// Left raw image: a GeoTIFF carrying its RPC (tag 50844), or any raster with --rpc-left.
+    left: PathBuf,
+    /// Right raw image, idem with --rpc-right.
+    right: PathBuf,
+    /// Output folder.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
+    #[arg(long, value_name = "X,Y,W,H", value_parser = RectifyArgs::parse_roi)]
+    roi: Option<camera::rectify::Roi>,
+    /// Left camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
+    #[arg(long, value_name = "JSON")]
+    rpc_left: Option<PathBuf>,
+    /// Right camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
+    #[arg(long, value_name = "JSON")]
+    rpc_right: Option<PathBuf>,
+    /// Altitudes of the scene MIN:MAX, metres; the disparity range is derived from it. Default:
+    /// min_alt/max_alt of the JSON cameras, else the RPCs' altitude offset ± scale (often
+    /// thousands of metres: a slow, huge search).
+    #[arg(long, value_name = "MIN:MAX", value_parser = RectifyArgs::parse_alt_range, allow_hyphen_values = true)]
+    alt_range: Option<(f64, f64)>,
+    /// Pair name <stem> of the output files. Default: <LEFT file stem>-<RIGHT file stem>.
+    #[arg(long, value_name = "NAME")]
+    stem: Option<String>,
+}
+
+impl RectifyArgs {
+    fn parse_roi(s: &str) -> Result<camera::rectify::Roi, String> {
+        let v: Vec<usize> = s
+            .split(',')
+            .map(|t| {
+                t.trim()
+                    .parse::<usize>()
+                    .map_err(|e| format!("{t:?} in {s:?}: {e}"))
+            })
+            .collect::<Result<_, _>>()?;
+        match v[..] {
+            [x, y, w, h] if w > 0 && h > 0 => Ok(camera::rectify::Roi::new(x, y, w, h)),
+            _ => Err(format!(
+                "expected X,Y,W,H with W, H > 0, e.g. 150,150,700,700, got {s:?}"
+            )),
+        }
+    }
+
+    fn parse_alt_range(s: &str) -> Result<(f64, f64), String> {
+        let (a, b) = s
+            .split_once(':')
+            .ok_or_else(|| format!("expected MIN:MAX in metres, e.g. -30:120, got {s:?}"))?;
+        let parse = |v: &str| {
+            v.trim()
+                .parse::<f64>()
+                .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+        };
+        let (lo, hi) = (parse(a)?, parse(b)?);
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(format!("MIN must be below MAX in {s:?}"));
+        }
+        Ok((lo, hi))
+    }
 }
 
 #[derive(Args)]
@@ -142,6 +221,73 @@ struct DemoArgs {
     sgm: SgmArgs,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum EvalMethod {
+    /// Census + SGM on each (cropped) rectified pair, range from the cameras.
+    Sgm,
+    /// The split's own disparity/<stem>.iio (LiDAR-derived): the error of the chain itself.
+    GroundTruth,
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Layout: SPLIT_DIR/{L,R}/<stem>.iio, SPLIT_DIR/homography/<stem>.npz, optional \
+    SPLIT_DIR/disparity/<stem>.iio; <stem> = <LEFTID>-<RIGHTID>; RPC_DIR/<IMAGEID>.json (SatNeRF/rpcm); \
+    TRUTH_DIR/<AOI>_DSM.tif, <AOI>_CLS.tif, optional <AOI>_WATER.png. Outputs: OUT/pairs.csv (one row \
+    per method, split and pair), OUT/table1.md, OUT/dsm/<method>/<split>/<stem>.tif with --save-dsm.\n\n\
+    Example: seasonstereo eval --split Jacksonville=test/jax --split \"Omaha Diach.\"=test/oma_dia \
+    --rpc-dir root_dir --truth-dir Track3-Truth --predictions preds/monster -o out/eval"
+)]
+struct EvalArgs {
+    /// A test split NAME=DIR (repeat). Table 1's names: Jacksonville, "Buenos Aires",
+    /// "Omaha Synch.", "Omaha Diach." (aliases jax, ba, omaha-sync, omaha-dia); other names get
+    /// columns of their own. Omaha splits drop pairs whose true disparity exceeds the limit.
+    #[arg(long = "split", value_name = "NAME=DIR", value_parser = pipeline::eval::Split::parse,
+          required_unless_present = "world")]
+    splits: Vec<pipeline::eval::Split>,
+    /// Evaluate a folder written by `seasonstereo world` (split "World", DIR/rpc, DIR/truth).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["splits", "rpc_dir", "truth_dir"])]
+    world: Option<PathBuf>,
+    /// Folder of the cameras <IMAGEID>.json (SatNeRF/rpcm JSON, the `root_dir`).
+    #[arg(long, value_name = "DIR", required_unless_present = "world")]
+    rpc_dir: Option<PathBuf>,
+    /// Folder of the ground truth <AOI>_DSM.tif, <AOI>_CLS.tif, <AOI>_WATER.png.
+    #[arg(long, value_name = "DIR", required_unless_present = "world")]
+    truth_dir: Option<PathBuf>,
+    /// Compute the disparities with this method...
+    #[arg(long, value_enum, default_value_t = EvalMethod::Sgm)]
+    method: EvalMethod,
+    /// ...or read them from DIR/[<SPLIT>/]<stem>.{iio,npy,tif,pfm} (full rectified or crop size).
+    #[arg(long, value_name = "DIR", conflicts_with = "method")]
+    predictions: Option<PathBuf>,
+    /// Row name of the method in the CSV and Table 1 (default: from the method or DIR).
+    #[arg(long)]
+    name: Option<String>,
+    /// Output folder.
+    #[arg(short, long, default_value = "out/eval")]
+    output: PathBuf,
+    /// Also write each predicted DSM as a GeoTIFF on the ground truth's grid.
+    #[arg(long)]
+    save_dsm: bool,
+    /// Evaluate at most the first N pairs (by stem) of each split.
+    #[arg(long, value_name = "N")]
+    max_pairs: Option<usize>,
+    /// AOI of an image id = its first N '_'-separated fields (JAX_068_001_RGB → JAX_068 with 2).
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
+    aoi_fields: u16,
+    /// Put every pair in this AOI instead (one ground-truth DSM for all).
+    #[arg(long, value_name = "AOI", conflicts_with = "aoi_fields")]
+    aoi: Option<String>,
+    /// Centre-crop rectified pairs larger than this, pixels.
+    #[arg(long, default_value_t = 1024)]
+    crop: usize,
+    /// Omaha pairs whose ground-truth disparity exceeds this are dropped, pixels.
+    #[arg(long, default_value_t = pipeline::eval::aggregate::OMAHA_MAX_DISPARITY)]
+    omaha_max_disparity: f64,
+    #[command(flatten)]
+    sgm: SgmArgs,
+}
+
 fn parse_range(s: &str) -> Result<(i32, i32), String> {
     let (a, b) = s
         .split_once(':')
@@ -189,6 +335,40 @@ fn run(cli: Cli) -> Result<()> {
                 100.0 * world.occluded.count() as f64 / (a.size * a.size) as f64
             );
         }
+        Command::Rectify(a) => {
+            let opts = pipeline::rectify::RectifyOptions {
+                left: a.left,
+                right: a.right,
+                out_dir: a.output,
+                roi: a.roi,
+                rpc_left: a.rpc_left,
+                rpc_right: a.rpc_right,
+                alt_range: a.alt_range,
+                stem: a.stem,
+            };
+            let s = pipeline::rectify::rectify(&opts, &progress)?;
+            let (lo, hi) = s.disparity_range;
+            println!(
+                "wrote pair {} ({}x{} px) to {}: disparity range {lo}:{hi} px for altitudes {}:{} m ({}, {:.3} px/m), rows aligned to {:.3} px",
+                s.stem, s.size.0, s.size.1, opts.out_dir.display(), s.alt_range.0, s.alt_range.1,
+                s.alt_source, s.pixels_per_metre, s.max_row_error
+            );
+            if s.right_coverage < 0.5 {
+                println!(
+                    "warning: the right image covers only {:.0} % of the region",
+                    100.0 * s.right_coverage
+                );
+            }
+            println!(
+                "next: seasonstereo predict --range {lo}:{hi} {} {} -o {}",
+                s.left.display(),
+                s.right.display(),
+                opts.out_dir
+                    .join("disparity")
+                    .join(format!("{}.iio", s.stem))
+                    .display()
+            );
+        }
         Command::Predict(a) => {
             let (left, right) = read_pair(&a.left, &a.right)?;
             let params = a.sgm.params()?;
@@ -228,6 +408,40 @@ fn run(cli: Cli) -> Result<()> {
             );
             let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
             println!("report: {} ({total:.1} s)", s.report.display());
+        }
+        Command::Eval(a) => {
+            use pipeline::eval::{evaluate, AoiRule, EvalOptions, Method as M};
+            let method = match (&a.predictions, a.method) {
+                (Some(dir), _) => M::Predictions(dir.clone()),
+                (None, EvalMethod::Sgm) => M::Sgm(a.sgm.params()?),
+                (None, EvalMethod::GroundTruth) => M::GroundTruth,
+            };
+            let mut opts = match &a.world {
+                Some(dir) => EvalOptions::world(dir, "World", method, &a.output),
+                None => EvalOptions::new(
+                    a.splits,
+                    a.rpc_dir.context("--rpc-dir is required")?,
+                    a.truth_dir.context("--truth-dir is required")?,
+                    method,
+                    &a.output,
+                ),
+            };
+            if let Some(n) = a.name {
+                opts.method_name = n;
+            }
+            opts.save_dsm = a.save_dsm;
+            opts.max_pairs = a.max_pairs;
+            opts.aoi_rule = a
+                .aoi
+                .map_or(AoiRule::Fields(a.aoi_fields as usize), AoiRule::Fixed);
+            opts.crop = a.crop;
+            opts.omaha_max_disparity = a.omaha_max_disparity;
+            let r = evaluate(&opts, &progress)?;
+            println!("{}", r.table.to_text());
+            println!(
+                "{} pairs scored, {} already scored (skipped), {} dropped (Omaha disparity > {}); per pair: {}; table: {}",
+                r.scored, r.skipped, r.dropped, opts.omaha_max_disparity, r.csv.display(), r.markdown.display()
+            );
         }
     }
     Ok(())

@@ -5,9 +5,11 @@
 //! Every stage reports progress through [`Progress`] so the CLI can draw bars while tests stay quiet.
 
 pub mod demo;
+pub mod eval;
 pub mod metrics;
 pub mod predict;
 pub mod progress;
+pub mod rectify;
 pub mod report;
 pub mod world_io;
 

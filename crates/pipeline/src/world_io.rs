@@ -9,16 +9,35 @@
 //! height/<stem>.iio                 altitude (m) of the surface seen by each left pixel
 //! classes/<ID>.png                  OpenEarthMap class ids of each view (8-bit)
 //! rpc/<ID>.json                     the raw camera as a degree-1 RPC (SatNeRF/rpcm JSON)
+//! truth/<AOI>_DSM.tif               ground-truth DSM, float32 GeoTIFF in the world's UTM zone
+//! truth/<AOI>_CLS.tif               DFC2019 classes on the DSM's grid (5 foliage, 9 water, …)
 //! world.json                        the parameters, disparity range and appearance model
 //! ```
-//! with `<stem>` = `<LEFTID>-<RIGHTID>`.
+//! with `<stem>` = `<LEFTID>-<RIGHTID>` and `<AOI>` the AOI of the left id under the default
+//! [`AoiRule`] (`WORLD_1_A` → `WORLD_1`), so `seasonstereo eval --world DIR` (split = DIR,
+//! `--rpc-dir DIR/rpc`, `--truth-dir DIR/truth`) reads it like the benchmark's test data.
+//!
+//! The ground-truth DSM is, by design, the evaluation protocol's own rasterisation (max per cell,
+//! floor to the cell, [`camera::rasterize_max`]) of the EXACT surface points seen at the left
+//! image's pixel centres: pixel (u, v) with altitude z sees ground point (u − slope·z − offset, v),
+//! converted to lon/lat with the world's geographic frame and to UTM. It is computed from the
+//! scene geometry, never through disparity, homographies or RPC triangulation, so evaluating the
+//! world's true disparity through the whole chain measures only the chain's error. The grid has
+//! the world's GSD (0.5 m) and covers every such point.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use raster::formats::{write_atomically, write_homographies, write_npy, write_png, PngDepth};
+use camera::{DsmGrid, Points, UtmZone};
+use raster::formats::{
+    write_atomically, write_geotiff, write_homographies, write_npy, write_png, GeoTiffMeta,
+    PngDepth,
+};
+use raster::Image;
 use serde_json::json;
 use world::World;
+
+use crate::eval::layout::{AoiRule, TruthFiles};
 
 /// The files of one rectified pair in the release layout.
 #[derive(Clone, Debug, PartialEq)]
@@ -93,6 +112,8 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
         let json = camera.to_satnerf_json(id, w, h, (lon_c, lat_c), half, alt_range);
         write_json(&root.join("rpc").join(format!("{id}.json")), &json)?;
     }
+    let aoi = AoiRule::default().aoi_of(&left_id);
+    write_world_truth(world, &TruthFiles::new(&root.join("truth"), &aoi))?;
     let p = &world.params;
     let meta = json!({
         "generator": "seasonstereo world",
@@ -111,6 +132,110 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
     });
     write_json(&root.join("world.json"), &meta)?;
     Ok(paths)
+}
+
+/// DFC2019 class of an OpenEarthMap id of the world: tree → 5 (foliage), water → 9, building → 6,
+/// everything else → 2 (ground).
+pub fn dfc_class(oem: u8) -> u8 {
+    match oem {
+        world::class::TREE => 5,
+        world::class::WATER => 9,
+        world::class::BUILDING => 6,
+        _ => 2,
+    }
+}
+
+/// DFC2019 "unlabeled": the class of DSM cells no point falls in.
+pub const DFC_UNLABELED: u8 = 65;
+
+/// The exact surface points seen at the left image's pixel centres, `[lon, lat, alt]` per pixel
+/// (NaN where the pixel sees nothing), and their DFC classes.
+pub fn world_surface_points(world: &World) -> (Points, Vec<u8>) {
+    let (w, h) = world.left.height.size();
+    let cam = &world.params.left;
+    let mut lonlatalt = Vec::with_capacity(w * h);
+    let mut classes = Vec::with_capacity(w * h);
+    for v in 0..h {
+        for u in 0..w {
+            let z = world.left.height.get(u, v, 0) as f64;
+            if !z.is_finite() {
+                lonlatalt.push([f64::NAN; 3]);
+                classes.push(DFC_UNLABELED);
+                continue;
+            }
+            let x = u as f64 - cam.slope * z - cam.offset;
+            let (lon, lat) = world.geo.lonlat(x, v as f64);
+            lonlatalt.push([lon, lat, z]);
+            classes.push(dfc_class(world.left.classes.get(u, v, 0) as u8));
+        }
+    }
+    let points = Points {
+        width: w,
+        height: h,
+        lonlatalt,
+    };
+    (points, classes)
+}
+
+/// The world's ground truth in the evaluation layout: `_DSM.tif` (max per cell of
+/// [`world_surface_points`] on a UTM grid at the world's GSD covering them) and `_CLS.tif` (the
+/// class of the point that gave each cell its height; 65 where empty). Returns the grid.
+pub fn write_world_truth(world: &World, files: &TruthFiles) -> Result<DsmGrid> {
+    let (points, classes) = world_surface_points(world);
+    let (w, h) = world.left.height.size();
+    let (lon_c, lat_c) = world.geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
+    let zone = UtmZone::from_lonlat(lon_c, lat_c);
+    let res = world.params.scene.gsd;
+    let mut b = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    let utm: Vec<Option<(f64, f64)>> = points
+        .lonlatalt
+        .iter()
+        .map(|p| {
+            p[2].is_finite().then(|| {
+                let (e, n) = zone.forward(p[0], p[1]);
+                b = [b[0].min(e), b[1].min(n), b[2].max(e), b[3].max(n)];
+                (e, n)
+            })
+        })
+        .collect();
+    if !b.iter().all(|v| v.is_finite()) {
+        bail!("the world has no visible surface point to build a DSM from");
+    }
+    let snap_lo = |v: f64| (v / res).floor() * res - res;
+    let snap_hi = |v: f64| (v / res).ceil() * res + res;
+    let grid = DsmGrid::from_bounds(
+        snap_lo(b[0]),
+        snap_lo(b[1]),
+        snap_hi(b[2]),
+        snap_hi(b[3]),
+        res,
+        zone.epsg(),
+    )?;
+    let dsm = camera::rasterize_max(&points, &grid);
+    let mut cls = Image::filled(grid.width, grid.height, 1, DFC_UNLABELED as f32);
+    for ((p, en), &c) in points.lonlatalt.iter().zip(&utm).zip(&classes) {
+        let Some((e, n)) = *en else { continue };
+        if let Some((col, row)) = grid.cell_of(e, n) {
+            if dsm.get(col, row, 0) == p[2] as f32 && cls.get(col, row, 0) == DFC_UNLABELED as f32 {
+                cls.set(col, row, 0, c as f32);
+            }
+        }
+    }
+    camera::write_dsm(&files.dsm, &dsm, &grid)
+        .with_context(|| format!("writing {}", files.dsm.display()))?;
+    let meta = GeoTiffMeta {
+        georef: Some(grid.georeference()),
+        nodata: None,
+        rpc: None,
+    };
+    write_geotiff(&files.cls, &cls, &meta)
+        .with_context(|| format!("writing {}", files.cls.display()))?;
+    Ok(grid)
 }
 
 /// A mask as an 8-bit picture: 255 where true, 0 elsewhere.

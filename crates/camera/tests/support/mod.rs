@@ -1,0 +1,23 @@
+//! Paths to the shared anchor data, read in place (never copied into the repository).
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+/// `<shared>/anchors/data/<rel>`, panicking with a clear message when it is missing.
+pub fn anchor(rel: &str) -> PathBuf {
+    let p = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/anchors/data/"
+    ))
+    .join(rel);
+    assert!(
+        p.exists(),
+        "anchor data file {} is missing: these tests need /work/shared/anchors/data",
+        p.display()
+    );
+    p
+}
+
+pub const JAX_JSON: &str = "rpcm/tests/test_rpc_files/JAX_068_001_RGB.json";
+pub const S2P_IMG1: &str = "s2p/tests/data/input_pair/img_01.tif";
+pub const S2P_IMG2: &str = "s2p/tests/data/input_pair/img_02.tif";

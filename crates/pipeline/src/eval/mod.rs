@@ -1,0 +1,563 @@
+//! `seasonstereo eval`: altitude MAE of the DSMs reconstructed from predicted disparities, as the
+//! benchmark's released evaluation code computes it, aggregated into the paper's Table 1.
+//!
+//! # The protocol, per pair
+//!
+//! 1. The disparity of the rectified pair: computed here (`Method::Sgm`, census + SGM over a range
+//!    derived from the cameras and the scene's altitude range), read from a folder of predictions
+//!    (`Method::Predictions`), or the split's own ground-truth disparity (`Method::GroundTruth`,
+//!    a check of the chain itself).
+//! 2. Inputs larger than [`EvalOptions::crop`] (1024) pixels are centre-cropped and both
+//!    homographies shifted accordingly ([`raster::geometry::crop_homography`]). A prediction file
+//!    may be given at the full rectified size (it is cropped) or at the crop's size.
+//! 3. The evaluation mask ([`camera::evaluation_mask`]: finite d > 0, 0 ≤ x − d < W, 32-px
+//!    border), then s2p's iterative triangulation with the full RPCs
+//!    ([`camera::triangulate_disparity`]).
+//! 4. Max-per-cell rasterisation on the ground-truth DSM's UTM grid ([`camera::rasterize_max`]).
+//! 5. Registration ([`align`]: integer shift by multiscale NCC, then vertical offset) and the
+//!    scores ([`metrics`]): MAE over all cells, without water, and without water and foliage
+//!    (`mae_filtered`, the headline number), coverage, shift and offset.
+//!
+//! Omaha pairs whose ground-truth disparity (`disparity/<stem>.iio`) exceeds 192 px are dropped
+//! (recorded with status `dropped_disparity_limit`, never aggregated). Aggregation
+//! ([`aggregate`]): median of the pair MAEs per AOI, per split the mean ± sample std over AOIs,
+//! and the average of the split means.
+//!
+//! # Outputs and resumability
+//!
+//! `<out>/pairs.csv` has one row per (method, split, pair); it is rewritten atomically after every
+//! pair, so a killed run keeps every finished pair and a rerun skips them (a second method written
+//! to the same folder adds rows, and a row of the table). `<out>/table1.md` is the table in
+//! markdown; with `save_dsm`, `<out>/dsm/<method>/<split>/<stem>.tif` are the predicted DSMs
+//! (float32 GeoTIFF on the ground truth's grid, before registration).
+//!
+//! # Layout
+//!
+//! See [`layout`] for the folders read and the assumptions made about the public release.
+//!
+//! # The procedural world
+//!
+//! [`crate::world_io::save_world`] also writes the world's ground truth in this layout
+//! (`truth/<AOI>_DSM.tif`, `truth/<AOI>_CLS.tif`, `rpc/<ID>.json`). Its DSM is, by design, the
+//! protocol's own max-per-cell rasterisation of the EXACT surface points seen at the left image's
+//! pixel centres, computed from the scene geometry (not through disparity, homographies or RPC
+//! triangulation); so evaluating the world's true disparity measures the error of the chain
+//! homographies → RPC triangulation → UTM → grid alone, which must be (and is) well below 5 cm.
+
+pub mod aggregate;
+pub mod align;
+pub mod layout;
+pub mod metrics;
+pub mod records;
+pub mod table;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use camera::{DsmGrid, RpcModel};
+use matching::SgmParams;
+use raster::formats::{read_homographies, read_tiff};
+use raster::geometry::{crop, crop_homography};
+use raster::{Homography, Image, Mask};
+
+use crate::progress::{Progress, Silent};
+pub use aggregate::{aggregate, Table};
+pub use align::{align, AlignParams, Alignment};
+pub use layout::{AoiRule, PairFiles, Split, TruthFiles};
+pub use metrics::{score_dsm, DsmScores, Exclusions};
+pub use records::{PairRecord, RecordFile};
+
+/// Name of the per-pair CSV in the output folder.
+pub const PAIRS_CSV: &str = "pairs.csv";
+/// Name of the markdown table in the output folder.
+pub const TABLE_MD: &str = "table1.md";
+
+/// Where the disparities come from.
+#[derive(Clone, Debug)]
+pub enum Method {
+    /// Census + SGM on the (cropped) rectified pair, over a range from the cameras.
+    Sgm(SgmParams),
+    /// `<dir>/[<split>/]<stem>.{iio,npy,tif,pfm}` (see [`layout::prediction_path`]).
+    Predictions(PathBuf),
+    /// The split's ground-truth disparity `disparity/<stem>.iio`: measures the chain's own error.
+    GroundTruth,
+}
+
+impl Method {
+    /// The default row name of the method in Table 1.
+    pub fn default_name(&self) -> String {
+        match self {
+            Method::Sgm(_) => "SGM (census)".to_string(),
+            Method::Predictions(dir) => dir
+                .file_name()
+                .map(|n| n.to_string_lossy().to_string())
+                .unwrap_or_else(|| "predictions".to_string()),
+            Method::GroundTruth => "ground-truth disparity".to_string(),
+        }
+    }
+}
+
+/// Everything an evaluation run needs.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    pub splits: Vec<Split>,
+    /// Folder of the SatNeRF/rpcm JSON cameras `<IMAGEID>.json`.
+    pub rpc_dir: PathBuf,
+    /// Folder of `<AOI>_DSM.tif`, `<AOI>_CLS.tif`, `<AOI>_WATER.png`.
+    pub truth_dir: PathBuf,
+    pub method: Method,
+    /// Row name in the CSV and Table 1.
+    pub method_name: String,
+    /// Output folder (CSV, table, DSMs).
+    pub out_dir: PathBuf,
+    pub save_dsm: bool,
+    /// At most this many pairs per split: the first ones by stem (scored or not).
+    pub max_pairs: Option<usize>,
+    pub aoi_rule: AoiRule,
+    /// Inputs larger than this (either side) are centre-cropped to it.
+    pub crop: usize,
+    /// Omaha pairs with a ground-truth disparity above this are dropped.
+    pub omaha_max_disparity: f64,
+    pub align: AlignParams,
+}
+
+impl EvalOptions {
+    /// The benchmark's settings for these splits, cameras, truth and method.
+    pub fn new(
+        splits: Vec<Split>,
+        rpc_dir: impl Into<PathBuf>,
+        truth_dir: impl Into<PathBuf>,
+        method: Method,
+        out_dir: impl Into<PathBuf>,
+    ) -> Self {
+        EvalOptions {
+            splits,
+            rpc_dir: rpc_dir.into(),
+            truth_dir: truth_dir.into(),
+            method_name: method.default_name(),
+            method,
+            out_dir: out_dir.into(),
+            save_dsm: false,
+            max_pairs: None,
+            aoi_rule: AoiRule::default(),
+            crop: 1024,
+            omaha_max_disparity: aggregate::OMAHA_MAX_DISPARITY,
+            align: AlignParams::default(),
+        }
+    }
+
+    /// A world folder written by `seasonstereo world` as one split named `name`: pairs, `rpc/` and
+    /// `truth/` all under `dir`.
+    pub fn world(dir: &Path, name: &str, method: Method, out_dir: impl Into<PathBuf>) -> Self {
+        EvalOptions::new(
+            vec![Split {
+                name: name.to_string(),
+                dir: dir.to_path_buf(),
+            }],
+            dir.join("rpc"),
+            dir.join("truth"),
+            method,
+            out_dir,
+        )
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug)]
+pub struct EvalReport {
+    /// Pairs scored by this run (including "no overlap" results).
+    pub scored: usize,
+    /// Pairs skipped because the CSV already had them.
+    pub skipped: usize,
+    /// Pairs dropped by the Omaha disparity rule in this run.
+    pub dropped: usize,
+    /// Every row of the CSV (all methods), after the run.
+    pub records: Vec<PairRecord>,
+    pub table: Table,
+    pub csv: PathBuf,
+    pub markdown: PathBuf,
+}
+
+/// The ground truth of one AOI, read once for all its pairs.
+struct Truth {
+    aoi: String,
+    dsm: Image,
+    grid: DsmGrid,
+    exclusions: Exclusions,
+}
+
+impl Truth {
+    fn read(files: &TruthFiles, aoi: &str) -> Result<Truth> {
+        let path = &files.dsm;
+        let raster = read_tiff(path)
+            .with_context(|| format!("reading the ground-truth DSM {}", path.display()))?;
+        let Some(georef) = raster.georef.clone() else {
+            bail!(
+                "{}: the ground-truth DSM has no georeference (GeoTIFF geotransform and UTM EPSG code needed)",
+                path.display()
+            );
+        };
+        let mut dsm = raster.image.channel(0);
+        if let Some(nd) = raster.nodata {
+            for v in dsm.data_mut() {
+                if (*v as f64) == nd || (nd.is_nan() && v.is_nan()) {
+                    *v = f32::NAN;
+                }
+            }
+        }
+        let (w, h) = dsm.size();
+        let grid = DsmGrid::from_georeference(&georef, w, h)
+            .with_context(|| format!("the grid of the ground-truth DSM {}", path.display()))?;
+        let cls = read_tiff(&files.cls)
+            .with_context(|| format!("reading the ground-truth classes {}", files.cls.display()))?
+            .image;
+        if cls.size() != (w, h) {
+            bail!(
+                "{}: the class raster is {}x{} but the DSM {} is {w}x{h}",
+                files.cls.display(),
+                cls.width(),
+                cls.height(),
+                path.display()
+            );
+        }
+        let water = if files.water.is_file() {
+            let m = raster::read_image(&files.water)
+                .with_context(|| format!("reading the water mask {}", files.water.display()))?;
+            if m.size() != (w, h) {
+                bail!(
+                    "{}: the water mask is {}x{} but the DSM {} is {w}x{h}",
+                    files.water.display(),
+                    m.width(),
+                    m.height(),
+                    path.display()
+                );
+            }
+            Some(Mask::from_image(&m))
+        } else {
+            None
+        };
+        Ok(Truth {
+            aoi: aoi.to_string(),
+            exclusions: Exclusions::from_classes(&cls, water.as_ref()),
+            dsm,
+            grid,
+        })
+    }
+}
+
+/// Runs the evaluation: every pair of every split not yet in `<out>/pairs.csv` for this method,
+/// then the table (printed by the caller, written to `<out>/table1.md`). Progress: one step per
+/// pair of each split.
+pub fn evaluate(opts: &EvalOptions, progress: &dyn Progress) -> Result<EvalReport> {
+    if opts.splits.is_empty() {
+        bail!("no split to evaluate (give --split NAME=DIR or --world DIR)");
+    }
+    if opts.method_name.trim().is_empty() {
+        bail!("the method name must not be empty");
+    }
+    let csv = opts.out_dir.join(PAIRS_CSV);
+    let mut file = RecordFile::open(&csv)?;
+    let (mut scored, mut skipped, mut dropped) = (0, 0, 0);
+    let mut truth: Option<Truth> = None;
+    for split in &opts.splits {
+        let mut stems = split.stems()?;
+        if let Some(n) = opts.max_pairs {
+            stems.truncate(n);
+        }
+        progress.begin(&format!("eval {}", split.name), stems.len());
+        for (i, stem) in stems.iter().enumerate() {
+            if file.contains(&opts.method_name, &split.name, stem) {
+                skipped += 1;
+                progress.advance(i + 1);
+                continue;
+            }
+            let record = evaluate_pair(opts, split, stem, &mut truth)
+                .with_context(|| format!("split {:?}, pair {stem}", split.name))?;
+            if record.status == records::STATUS_DROPPED {
+                dropped += 1;
+            } else {
+                scored += 1;
+            }
+            file.push(record)?;
+            progress.advance(i + 1);
+        }
+        progress.end();
+    }
+    let records = file.rows().to_vec();
+    let table = aggregate(&records);
+    let markdown = opts.out_dir.join(TABLE_MD);
+    let text = table.to_markdown();
+    raster::formats::write_atomically(&markdown, |f| std::io::Write::write_all(f, text.as_bytes()))
+        .with_context(|| format!("writing {}", markdown.display()))?;
+    Ok(EvalReport {
+        scored,
+        skipped,
+        dropped,
+        records,
+        table,
+        csv,
+        markdown,
+    })
+}
+
+/// Reads a disparity file, first channel.
+fn read_disparity(path: &Path, what: &str) -> Result<Image> {
+    Ok(raster::read_image(path)
+        .with_context(|| format!("reading the {what} {}", path.display()))?
+        .channel(0))
+}
+
+/// The centre crop of a `(w, h)` rectified frame to at most `max` per side: `(x0, y0, cw, ch)`.
+pub fn centre_crop_window(w: usize, h: usize, max: usize) -> (usize, usize, usize, usize) {
+    let (cw, ch) = (w.min(max), h.min(max));
+    ((w - cw) / 2, (h - ch) / 2, cw, ch)
+}
+
+/// A disparity at the full rectified size `full` is cropped to the window; one already at the
+/// window's size is kept; any other size is an error naming `path`.
+fn fit_disparity(
+    d: Image,
+    path: &Path,
+    full: (usize, usize),
+    win: (usize, usize, usize, usize),
+) -> Result<Image> {
+    let (x0, y0, cw, ch) = win;
+    if d.size() == full {
+        if (cw, ch) == full {
+            return Ok(d);
+        }
+        return Ok(crop(&d, x0, y0, cw, ch)?);
+    }
+    if d.size() == (cw, ch) {
+        return Ok(d);
+    }
+    bail!(
+        "{}: the disparity is {}x{} but the rectified pair is {}x{} (centre crop {cw}x{ch})",
+        path.display(),
+        d.width(),
+        d.height(),
+        full.0,
+        full.1
+    )
+}
+
+/// The disparity range of a rectified (cropped) frame of size `(w, h)` from the cameras: a grid of
+/// left pixels is localised at the scene's lowest and highest altitudes and projected into the
+/// right image; widened by 2 px each side.
+pub fn camera_disparity_range(
+    rpc_left: &RpcModel,
+    rpc_right: &RpcModel,
+    h_left: &Homography,
+    h_right: &Homography,
+    (w, h): (usize, usize),
+) -> Result<(i32, i32)> {
+    let inv = h_left
+        .inverse()
+        .context("the left homography is singular")?;
+    let (a_lo, a_hi) = rpc_left.scene_altitude_range();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let n = 9;
+    for j in 0..n {
+        for i in 0..n {
+            let x = (w.saturating_sub(1)) as f64 * i as f64 / (n - 1) as f64;
+            let y = (h.saturating_sub(1)) as f64 * j as f64 / (n - 1) as f64;
+            let (c, r) = inv.apply(x, y);
+            for alt in [a_lo, a_hi] {
+                let Ok((lon, lat)) = rpc_left.localization(c, r, alt) else {
+                    continue;
+                };
+                let (cr, rr) = rpc_right.projection(lon, lat, alt);
+                let (xr, _) = h_right.apply(cr, rr);
+                let d = x - xr;
+                if d.is_finite() {
+                    lo = lo.min(d);
+                    hi = hi.max(d);
+                }
+            }
+        }
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        bail!("cannot derive a disparity range from the cameras (localisation failed everywhere)");
+    }
+    Ok(((lo.floor() - 2.0) as i32, (hi.ceil() + 2.0) as i32))
+}
+
+fn read_rpc(path: &Path, side: &str) -> Result<RpcModel> {
+    if !path.is_file() {
+        bail!(
+            "{}: the {side} camera (SatNeRF/rpcm JSON) does not exist",
+            path.display()
+        );
+    }
+    RpcModel::read_rpcm_json(path)
+        .with_context(|| format!("reading the {side} camera {}", path.display()))
+}
+
+fn safe_name(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Scores one pair (or drops it by the Omaha rule).
+fn evaluate_pair(
+    opts: &EvalOptions,
+    split: &Split,
+    stem: &str,
+    truth: &mut Option<Truth>,
+) -> Result<PairRecord> {
+    let files = PairFiles::new(
+        &split.dir,
+        stem,
+        &opts.rpc_dir,
+        &opts.truth_dir,
+        &opts.aoi_rule,
+    )?;
+    let mut record = PairRecord {
+        split: split.name.clone(),
+        stem: stem.to_string(),
+        aoi: files.aoi.clone(),
+        method: opts.method_name.clone(),
+        status: records::STATUS_SCORED.to_string(),
+        mae_raw: None,
+        mae_no_water: None,
+        mae_filtered: None,
+        coverage: None,
+        dx: None,
+        dy: None,
+        offset: None,
+        pixels: 0,
+        cells: 0,
+        max_gt_disparity: None,
+    };
+
+    // The ground-truth disparity: needed by the Omaha rule and by Method::GroundTruth.
+    let omaha = layout::is_omaha_split(&split.name);
+    let needs_gt = omaha || matches!(opts.method, Method::GroundTruth);
+    let gt_disparity = if needs_gt && files.gt_disparity.is_file() {
+        Some(read_disparity(
+            &files.gt_disparity,
+            "ground-truth disparity",
+        )?)
+    } else {
+        None
+    };
+    if let Some(d) = &gt_disparity {
+        let (exceeds, max) = aggregate::exceeds_disparity_limit(d, opts.omaha_max_disparity);
+        record.max_gt_disparity = max;
+        if omaha && exceeds {
+            record.status = records::STATUS_DROPPED.to_string();
+            return Ok(record);
+        }
+    }
+
+    // Ground truth of the AOI (cached across its pairs).
+    if truth.as_ref().is_none_or(|t| t.aoi != files.aoi) {
+        *truth = Some(Truth::read(&files.truth, &files.aoi)?);
+    }
+    let truth = truth.as_ref().expect("just read");
+
+    let rpc_left = read_rpc(&files.rpc_left, "left")?;
+    let rpc_right = read_rpc(&files.rpc_right, "right")?;
+    let (hl, hr) = read_homographies(&files.homography)
+        .with_context(|| format!("reading the homographies {}", files.homography.display()))?;
+    let left_img = raster::read_image(&files.left)
+        .with_context(|| format!("reading the left image {}", files.left.display()))?;
+    let full = left_img.size();
+    let win = centre_crop_window(full.0, full.1, opts.crop);
+    let (x0, y0, cw, ch) = win;
+    let (hl, hr) = (
+        crop_homography(&hl, x0 as f64, y0 as f64),
+        crop_homography(&hr, x0 as f64, y0 as f64),
+    );
+
+    let disparity = match &opts.method {
+        Method::Sgm(params) => {
+            let right_img = raster::read_image(&files.right)
+                .with_context(|| format!("reading the right image {}", files.right.display()))?;
+            if right_img.size() != full {
+                bail!(
+                    "{}: the right image is {}x{} but the left one {} is {}x{}",
+                    files.right.display(),
+                    right_img.width(),
+                    right_img.height(),
+                    files.left.display(),
+                    full.0,
+                    full.1
+                );
+            }
+            let l = crop(&left_img, x0, y0, cw, ch)?;
+            let r = crop(&right_img, x0, y0, cw, ch)?;
+            let range = camera_disparity_range(&rpc_left, &rpc_right, &hl, &hr, (cw, ch))?;
+            crate::predict::predict_sgm(&l, &r, Some(range), params, &Silent)?.0
+        }
+        Method::Predictions(dir) => {
+            let path = layout::prediction_path(dir, &split.name, stem)?;
+            let d = read_disparity(&path, "predicted disparity")?;
+            fit_disparity(d, &path, full, win)?
+        }
+        Method::GroundTruth => {
+            let Some(d) = gt_disparity else {
+                bail!(
+                    "{}: the ground-truth disparity does not exist",
+                    files.gt_disparity.display()
+                );
+            };
+            fit_disparity(d, &files.gt_disparity, full, win)?
+        }
+    };
+    drop(left_img);
+
+    let dsm = predicted_dsm(&disparity, &hl, &hr, &rpc_left, &rpc_right, &truth.grid)?;
+    record.pixels = dsm.1;
+    let dsm = dsm.0;
+    if opts.save_dsm {
+        let path = opts
+            .out_dir
+            .join("dsm")
+            .join(safe_name(&opts.method_name))
+            .join(safe_name(&split.name))
+            .join(format!("{stem}.tif"));
+        camera::write_dsm(&path, &dsm, &truth.grid)
+            .with_context(|| format!("writing the predicted DSM {}", path.display()))?;
+    }
+    let s = score_dsm(&dsm, &truth.dsm, &truth.exclusions, &opts.align)?;
+    if s.no_overlap() {
+        record.status = records::STATUS_NO_OVERLAP.to_string();
+    }
+    record.mae_raw = s.mae_raw;
+    record.mae_no_water = s.mae_no_water;
+    record.mae_filtered = s.mae_filtered;
+    record.coverage = s.coverage;
+    record.offset = s.offset;
+    if s.offset.is_some() {
+        record.dx = Some(s.dx);
+        record.dy = Some(s.dy);
+    }
+    record.cells = s.cells;
+    Ok(record)
+}
+
+/// The DSM of a (cropped) rectified disparity on `grid`: evaluation mask, triangulation with the
+/// RPCs, max per cell. Returns the DSM and the number of pixels triangulated.
+pub fn predicted_dsm(
+    disparity: &Image,
+    h_left: &Homography,
+    h_right: &Homography,
+    rpc_left: &RpcModel,
+    rpc_right: &RpcModel,
+    grid: &DsmGrid,
+) -> Result<(Image, usize)> {
+    let mask = camera::evaluation_mask(disparity);
+    let pixels = mask.count();
+    let points =
+        camera::triangulate_disparity(disparity, h_left, h_right, rpc_left, rpc_right, &mask)?;
+    let dsm = camera::rasterize_max(&points, grid);
+    Ok((dsm, pixels))
+}
