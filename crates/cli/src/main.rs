@@ -3,6 +3,7 @@
 //! This binary only parses arguments and draws progress; the work lives in the library crates.
 
 mod bars;
+mod dsm;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -40,6 +41,9 @@ enum Command {
     Rectify(RectifyArgs),
     /// Predict the disparity of a rectified pair.
     Predict(PredictArgs),
+    /// Turn a rectified disparity into a georeferenced DSM (RPC triangulation, highest point per
+    /// cell), on a ground truth's grid or on a UTM grid of your choosing.
+    Dsm(dsm::DsmArgs),
     /// Run the whole chain on a procedural world and write an HTML report (offline, CPU, seconds).
     Demo(DemoArgs),
     /// Altitude MAE of the DSMs from predicted disparities, as the benchmark's code computes it
@@ -76,7 +80,7 @@ enum Method {
 #[command(
     after_help = "Writes OUT/L/<stem>.iio and OUT/R/<stem>.iio (NPY float32, NaN outside the \
     raw images), OUT/homography/<stem>.npz (Hleft, Hright: raw → rectified, flip included) and \
-    OUT/rectify.json (ranges, region, sizes). Disparity x_L − x_R is positive and grows with \
+    OUT/rectify/<STEM>.json (ranges, region, sizes). Disparity x_L − x_R is positive and grows with \
     altitude; pass the printed range to `seasonstereo predict --range`.\n\n\
     Example (s2p's Pléiades test pair):\n  seasonstereo rectify img_01.tif img_02.tif -o out/s2p \
     --roi 150,150,700,700 --alt-range 2200:2450"
@@ -388,6 +392,7 @@ fn run(cli: Cli) -> Result<()> {
                 100.0 * valid as f64 / disparity.data().len().max(1) as f64
             );
         }
+        Command::Dsm(a) => dsm::run(a)?,
         Command::Demo(a) => {
             let opts = DemoOptions {
                 size: a.size,

@@ -176,7 +176,109 @@ fn errors_name_the_file_and_exit_nonzero() {
 fn help_lists_every_command() {
     let o = seasonstereo(&["--help"]);
     let text = String::from_utf8_lossy(&o.stdout);
-    for c in ["world", "predict", "demo"] {
+    for c in ["world", "rectify", "predict", "dsm", "demo", "eval"] {
         assert!(text.contains(c), "{text}");
     }
+}
+
+#[test]
+fn world_disparity_to_dsm_and_eval_agree_with_the_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("world");
+    let root_s = root.to_str().unwrap();
+    assert!(
+        seasonstereo(&["world", "--size", "128", "--seed", "4", "-o", root_s])
+            .status
+            .success()
+    );
+    let stem = "WORLD_4_A-WORLD_4_B";
+    let file = |sub: &str, name: &str| root.join(sub).join(name).to_str().unwrap().to_owned();
+    let truth = file("truth", "WORLD_4_DSM.tif");
+    let dsm = dir.path().join("dsm.tif");
+    let o = seasonstereo(&[
+        "dsm",
+        &file("disparity", &format!("{stem}.iio")),
+        "--homography",
+        &file("homography", &format!("{stem}.npz")),
+        "--rpc-left",
+        &file("rpc", "WORLD_4_A.json"),
+        "--rpc-right",
+        &file("rpc", "WORLD_4_B.json"),
+        "--like",
+        &truth,
+        "--compare",
+        &truth,
+        "-o",
+        dsm.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("median |Δh| 0.000 m"), "{stdout}");
+    let written = raster::formats::read_tiff(&dsm).unwrap();
+    assert_eq!(
+        written.georef.unwrap().epsg,
+        Some(32617),
+        "the world lies in UTM 17N"
+    );
+
+    let out = dir.path().join("eval");
+    let eval = || {
+        seasonstereo(&[
+            "eval",
+            "--world",
+            root_s,
+            "--method",
+            "ground-truth",
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = eval();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        table.contains("Jacksonville")
+            && table.contains("World")
+            && table.contains("1 pairs scored"),
+        "{table}"
+    );
+    let again = String::from_utf8_lossy(&eval().stdout).into_owned();
+    assert!(
+        again.contains("0 pairs scored, 1 already scored"),
+        "{again}"
+    );
+}
+
+#[test]
+fn dsm_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("d.iio");
+    raster::write_image(&d, &raster::Image::filled(16, 16, 1, 3.0)).unwrap();
+    let bad_json = dir.path().join("bad.json");
+    std::fs::write(&bad_json, "{\"rpc\": {\"row_offset\": 1}}").unwrap();
+    let h = dir.path().join("h.npz");
+    raster::formats::write_homographies(
+        &h,
+        &raster::Homography::IDENTITY,
+        &raster::Homography::IDENTITY,
+    )
+    .unwrap();
+    let o = seasonstereo(&[
+        "dsm",
+        d.to_str().unwrap(),
+        "--homography",
+        h.to_str().unwrap(),
+        "--rpc-left",
+        bad_json.to_str().unwrap(),
+        "--rpc-right",
+        bad_json.to_str().unwrap(),
+        "-o",
+        dir.path().join("out.tif").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("bad.json"), "{}", stderr(&o));
+    assert!(
+        !dir.path().join("out.tif").exists(),
+        "nothing written on error"
+    );
 }

@@ -5,6 +5,7 @@
 //! Every stage reports progress through [`Progress`] so the CLI can draw bars while tests stay quiet.
 
 pub mod demo;
+pub mod dsm;
 pub mod eval;
 pub mod metrics;
 pub mod predict;

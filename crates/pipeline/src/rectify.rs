@@ -4,7 +4,7 @@
 //! ```text
 //! L/<stem>.iio  R/<stem>.iio     rectified images, NPY float32 (H, W, C), NaN outside the raw images
 //! homography/<stem>.npz          Hleft, Hright (raw → rectified, any left/right flip included)
-//! rectify.json                   the pair, region, altitude and disparity ranges, sizes, accuracy
+//! rectify/<stem>.json            the pair, region, altitude and disparity ranges, sizes, accuracy
 //! ```
 //!
 //! The cameras come from the GeoTIFF RPC tag (50844) or from SatNeRF/rpcm JSON files; the
@@ -31,7 +31,7 @@ pub struct RectifyOptions {
     pub left: PathBuf,
     /// Right raw image.
     pub right: PathBuf,
-    /// Output folder (L/, R/, homography/, rectify.json).
+    /// Output folder (L/, R/, homography/, rectify/).
     pub out_dir: PathBuf,
     /// Region of interest of the left raw image; the whole image when `None`.
     pub roi: Option<Roi>,
@@ -163,7 +163,7 @@ fn file_stem(path: &Path) -> Result<String> {
 }
 
 /// Rectifies a raw pair from its cameras and writes `L/<stem>.iio`, `R/<stem>.iio`,
-/// `homography/<stem>.npz` and `rectify.json` under `opts.out_dir` (every file written
+/// `homography/<stem>.npz` and `rectify/<stem>.json` under `opts.out_dir` (every file written
 /// atomically).
 pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<RectifySummary> {
     let stem = match &opts.stem {
@@ -211,7 +211,7 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
     let left_path = dir.join("L").join(format!("{stem}.iio"));
     let right_path = dir.join("R").join(format!("{stem}.iio"));
     let homography = dir.join("homography").join(format!("{stem}.npz"));
-    let report = dir.join("rectify.json");
+    let report = dir.join("rectify").join(format!("{stem}.json"));
     write_npy(&left_path, &pair.left)?;
     write_npy(&right_path, &pair.right)?;
     write_homographies(&homography, &pair.h_left, &pair.h_right)?;

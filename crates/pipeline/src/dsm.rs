@@ -1,0 +1,240 @@
+//! Disparity → DSM for one rectified pair: triangulate every valid pixel with the full RPCs and
+//! grid the points (highest per cell) onto a ground-truth DSM's grid or a grid of the user's
+//! choosing; optionally compare with a reference DSM after the benchmark's alignment.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use camera::{rasterize_max, triangulate_disparity, write_dsm, DsmGrid, Points, RpcModel, UtmZone};
+use raster::{Image, Mask};
+
+use crate::eval::aggregate::median;
+use crate::eval::align::{align, apply, AlignParams};
+
+/// Where the DSM cells are.
+#[derive(Clone, Debug)]
+pub enum GridChoice {
+    /// The grid of an existing georeferenced DSM (e.g. the ground truth).
+    Like(PathBuf),
+    /// `resolution` metres; UTM bounds (x_min, y_min, x_max, y_max) or the points' extent; the UTM
+    /// zone by EPSG code or from the points' centre.
+    Resolution {
+        resolution: f64,
+        bounds: Option<[f64; 4]>,
+        epsg: Option<u32>,
+    },
+}
+
+/// Inputs of [`disparity_to_dsm`].
+#[derive(Clone, Debug)]
+pub struct DsmOptions {
+    /// Disparity of the rectified pair (left view, x_R = x_L − d).
+    pub disparity: PathBuf,
+    /// `Hleft`/`Hright` (raw → rectified) of the pair.
+    pub homography: PathBuf,
+    /// Cameras of the raw images: SatNeRF/rpcm JSON, or a GeoTIFF with the RPC tag.
+    pub rpc_left: PathBuf,
+    pub rpc_right: PathBuf,
+    pub grid: GridChoice,
+    /// Pixels trimmed on every side before triangulating (the benchmark trims 32).
+    pub border: usize,
+    /// Output GeoTIFF.
+    pub output: PathBuf,
+    /// A reference DSM to compare with after alignment.
+    pub compare: Option<PathBuf>,
+}
+
+/// Agreement of a DSM with a reference after the benchmark's alignment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    /// Cells finite in both.
+    pub shared: usize,
+    pub median_abs: f64,
+    pub mean_abs: f64,
+    pub dx: i32,
+    pub dy: i32,
+    pub offset: f64,
+}
+
+/// What [`disparity_to_dsm`] did.
+#[derive(Clone, Debug)]
+pub struct DsmSummary {
+    pub points: usize,
+    pub grid: DsmGrid,
+    pub filled_cells: usize,
+    pub comparison: Option<Comparison>,
+}
+
+/// Reads a camera from a SatNeRF/rpcm JSON file or from the RPC tag of a GeoTIFF.
+pub fn read_camera(path: &Path) -> Result<RpcModel> {
+    let is_json = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let rpc = if is_json {
+        RpcModel::read_rpcm_json(path)
+    } else {
+        RpcModel::read_geotiff_rpc(path)
+    };
+    rpc.with_context(|| format!("reading the camera of {}", path.display()))
+}
+
+/// Pixels whose disparity is finite and whose match lies inside the right image, `border` pixels
+/// away from the edges.
+pub fn valid_pixels(disparity: &Image, border: usize) -> Mask {
+    let (w, h) = disparity.size();
+    Mask::from_fn(w, h, |x, y| {
+        let d = disparity.get(x, y, 0) as f64;
+        let xr = x as f64 - d;
+        x >= border
+            && y >= border
+            && x + border < w
+            && y + border < h
+            && d.is_finite()
+            && xr >= 0.0
+            && xr < w as f64
+    })
+}
+
+/// Triangulates the disparity and writes the DSM.
+pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
+    let disparity = raster::read_image(&opts.disparity)
+        .with_context(|| format!("reading the disparity {}", opts.disparity.display()))?;
+    if disparity.channels() != 1 {
+        bail!(
+            "{}: a disparity has one channel, this raster has {}",
+            opts.disparity.display(),
+            disparity.channels()
+        );
+    }
+    let (h_left, h_right) = raster::formats::read_homographies(&opts.homography)?;
+    let rpc_left = read_camera(&opts.rpc_left)?;
+    let rpc_right = read_camera(&opts.rpc_right)?;
+    let mask = valid_pixels(&disparity, opts.border);
+    let points = triangulate_disparity(&disparity, &h_left, &h_right, &rpc_left, &rpc_right, &mask)
+        .with_context(|| format!("triangulating {}", opts.disparity.display()))?;
+    if points.valid_count() == 0 {
+        bail!(
+            "{}: no pixel could be triangulated (no finite disparity inside the right image)",
+            opts.disparity.display()
+        );
+    }
+    let grid = match &opts.grid {
+        GridChoice::Like(path) => DsmGrid::read_geotiff(path)
+            .with_context(|| format!("reading the grid of {}", path.display()))?,
+        GridChoice::Resolution {
+            resolution,
+            bounds,
+            epsg,
+        } => grid_for(&points, *resolution, *bounds, *epsg)?,
+    };
+    let dsm = rasterize_max(&points, &grid);
+    write_dsm(&opts.output, &dsm, &grid)
+        .with_context(|| format!("writing {}", opts.output.display()))?;
+    let comparison = match &opts.compare {
+        Some(reference) => Some(compare_with(&dsm, &grid, reference)?),
+        None => None,
+    };
+    Ok(DsmSummary {
+        points: points.valid_count(),
+        filled_cells: dsm.data().iter().filter(|v| v.is_finite()).count(),
+        grid,
+        comparison,
+    })
+}
+
+/// A grid at `resolution` over `bounds`, or over the points' UTM extent.
+fn grid_for(
+    points: &Points,
+    resolution: f64,
+    bounds: Option<[f64; 4]>,
+    epsg: Option<u32>,
+) -> Result<DsmGrid> {
+    let valid = || {
+        points
+            .lonlatalt
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+    };
+    let zone = match epsg {
+        Some(code) => UtmZone::from_epsg(code)?,
+        None => {
+            let n = valid().count() as f64;
+            let (lon, lat) = valid().fold((0.0, 0.0), |(a, b), p| (a + p[0] / n, b + p[1] / n));
+            UtmZone::from_lonlat(lon, lat)
+        }
+    };
+    let [x_min, y_min, x_max, y_max] = match bounds {
+        Some(b) => b,
+        None => valid().fold(
+            [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ],
+            |b, p| {
+                let (e, n) = zone.forward(p[0], p[1]);
+                [
+                    b[0].min(e),
+                    b[1].min(n),
+                    b[2].max(e + resolution),
+                    b[3].max(n + resolution),
+                ]
+            },
+        ),
+    };
+    Ok(DsmGrid::from_bounds(
+        x_min,
+        y_min,
+        x_max,
+        y_max,
+        resolution,
+        zone.epsg(),
+    )?)
+}
+
+/// Aligns `dsm` to the reference DSM (same grid required) and measures |Δh|.
+fn compare_with(dsm: &Image, grid: &DsmGrid, reference: &Path) -> Result<Comparison> {
+    let raster = raster::formats::read_tiff(reference)?;
+    let ref_grid = DsmGrid::of_raster(&raster, &reference.display().to_string())?;
+    if &ref_grid != grid {
+        bail!(
+            "{}: the reference DSM is on another grid; build the DSM with --like {}",
+            reference.display(),
+            reference.display()
+        );
+    }
+    let mut truth = raster.image.channel(0);
+    if let Some(nodata) = raster.nodata.filter(|v| !v.is_nan()) {
+        for v in truth.data_mut().iter_mut().filter(|v| **v == nodata as f32) {
+            *v = f32::NAN;
+        }
+    }
+    let a = align(&truth, dsm, &AlignParams::default()).with_context(|| {
+        format!(
+            "{}: the DSM and the reference share no cell",
+            reference.display()
+        )
+    })?;
+    let aligned = apply(dsm, a.dx, a.dy, a.offset);
+    let diffs: Vec<f64> = aligned
+        .data()
+        .iter()
+        .zip(truth.data())
+        .filter(|(p, t)| p.is_finite() && t.is_finite())
+        .map(|(p, t)| (p - t).abs() as f64)
+        .collect();
+    let Some(median_abs) = median(&diffs) else {
+        bail!("{}: no shared cell after alignment", reference.display());
+    };
+    let n = diffs.len();
+    Ok(Comparison {
+        shared: n,
+        median_abs,
+        mean_abs: diffs.iter().sum::<f64>() / n as f64,
+        dx: a.dx,
+        dy: a.dy,
+        offset: a.offset,
+    })
+}
