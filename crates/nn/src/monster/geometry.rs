@@ -1,0 +1,161 @@
+//! Combined Geo Encoding Volume (upstream `core/geometry.py`, IGEV): an all-pairs correlation of
+//! the matching features plus the 3-D-aggregated geometry volume, both as 2-level pyramids, looked
+//! up around the current disparity with radius `r` (2r+1 taps per level).
+//!
+//! Upstream samples with `grid_sample(align_corners=True, padding='zeros')` on height-1 images,
+//! which is exactly 1-D linear interpolation with zeros outside `[0, len-1]`; here it is done with
+//! two gathers per level (differentiable w.r.t. the volumes, like upstream; the disparity is
+//! detached by the caller upstream anyway).
+//!
+//! Output channel order (B×162×h×w for r=4, 2 levels, 8 groups): per level `[geo: c·(2r+1)+k,
+//! corr: k]`, level 0 then level 1.
+
+use burn::tensor::{Int, Tensor};
+
+/// The precomputed pyramids of a forward pass (upstream `Combined_Geo_Encoding_Volume`).
+#[derive(Debug, Clone)]
+pub struct GeoEncodingVolume {
+    /// Per level: geometry volume `[B·h·w, C, D/2^i]`.
+    geo: Vec<Tensor<3>>,
+    /// Per level: all-pairs correlation `[B·h·w, w/2^i]`.
+    corr: Vec<Tensor<2>>,
+    radius: usize,
+    dims: [usize; 3],
+}
+
+impl GeoEncodingVolume {
+    /// `match_left`, `match_right`: `[B, C, h, w]` matching features (no 1/√C scaling);
+    /// `geo_volume`: `[B, G, D, h, w]` (the output of the hourglass, `cost_agg`).
+    pub fn new(
+        match_left: Tensor<4>,
+        match_right: Tensor<4>,
+        geo_volume: Tensor<5>,
+        radius: usize,
+        num_levels: usize,
+    ) -> Self {
+        let [b, c, h, w1] = match_left.dims();
+        let w2 = match_right.dims()[3];
+        // corr[b, y, x1, x2] = Σ_c L[b, c, y, x1]·R[b, c, y, x2]
+        let l = match_left.permute([0, 2, 3, 1]).reshape([b * h, w1, c]);
+        let r = match_right.permute([0, 2, 1, 3]).reshape([b * h, c, w2]);
+        let mut corr = l.matmul(r).reshape([b * h * w1, w2]);
+        let [gb, g, d, gh, gw] = geo_volume.dims();
+        assert_eq!(
+            [gb, gh, gw],
+            [b, h, w1],
+            "geo volume and matching features disagree"
+        );
+        let mut geo = geo_volume
+            .permute([0, 3, 4, 1, 2])
+            .reshape([b * h * w1, g, d]);
+
+        let mut geo_pyr = vec![geo.clone()];
+        let mut corr_pyr = vec![corr.clone()];
+        for _ in 1..num_levels {
+            // avg_pool2d([1,2], stride [1,2]) along the last axis (floor for odd lengths).
+            let [n, g, d] = geo.dims();
+            geo = geo
+                .narrow(2, 0, d / 2 * 2)
+                .reshape([n, g, d / 2, 2])
+                .mean_dim(3)
+                .reshape([n, g, d / 2]);
+            let [n, l2] = corr.dims();
+            corr = corr
+                .narrow(1, 0, l2 / 2 * 2)
+                .reshape([n, l2 / 2, 2])
+                .mean_dim(2)
+                .reshape([n, l2 / 2]);
+            geo_pyr.push(geo.clone());
+            corr_pyr.push(corr.clone());
+        }
+        Self {
+            geo: geo_pyr,
+            corr: corr_pyr,
+            radius,
+            dims: [b, h, w1],
+        }
+    }
+
+    /// Number of output channels: `levels · (2r+1) · (G + 1)`.
+    pub fn out_channels(&self) -> usize {
+        let g = self.geo[0].dims()[1];
+        self.geo.len() * (2 * self.radius + 1) * (g + 1)
+    }
+
+    /// Upstream `geo_fn(disp, coords)` with `coords = x` (the column index): `disp` `[B, 1, h, w]`
+    /// → `[B, levels·(2r+1)·(G+1), h, w]`.
+    pub fn lookup(&self, disp: &Tensor<4>) -> Tensor<4> {
+        let [b, h, w] = self.dims;
+        assert_eq!(disp.dims(), [b, 1, h, w], "disparity shape");
+        let device = disp.device();
+        let taps = 2 * self.radius + 1;
+        let n = b * h * w;
+        let disp = disp.clone().reshape([n, 1]);
+        let dx = Tensor::<1, Int>::arange(-(self.radius as i64)..self.radius as i64 + 1, &device)
+            .float()
+            .reshape([1, taps]);
+        let xs = Tensor::<1, Int>::arange(0..w as i64, &device)
+            .float()
+            .reshape([1, 1, w])
+            .expand([b * h, 1, w])
+            .reshape([n, 1]);
+        let mut out = Vec::with_capacity(2 * self.geo.len());
+        for (i, (geo, corr)) in self.geo.iter().zip(&self.corr).enumerate() {
+            let scale = (1u64 << i) as f32;
+            // Upstream: x0 = dx + disp / 2^i (geo); coords / 2^i - disp / 2^i + dx (corr).
+            let pos_geo = disp.clone().div_scalar(scale) + dx.clone();
+            let pos_corr =
+                xs.clone().div_scalar(scale) - disp.clone().div_scalar(scale) + dx.clone();
+            let [_, g, d] = geo.dims();
+            let idx = linear_taps(pos_geo, d);
+            let sampled_geo = sample_3d(geo.clone(), &idx, g); // [n, g, taps]
+            out.push(sampled_geo.reshape([n, g * taps]));
+            let l2 = corr.dims()[1];
+            let idx = linear_taps(pos_corr, l2);
+            out.push(sample_2d(corr.clone(), &idx));
+        }
+        let c = out.iter().map(|t| t.dims()[1]).sum::<usize>();
+        Tensor::cat(out, 1)
+            .reshape([b, h, w, c])
+            .permute([0, 3, 1, 2])
+    }
+}
+
+/// Indices and weights of 1-D linear interpolation with zeros outside `[0, len-1]`:
+/// `(i0, w0, i1, w1)`, indices clamped into range, weights zeroed for taps outside.
+struct Taps {
+    i0: Tensor<2, Int>,
+    w0: Tensor<2>,
+    i1: Tensor<2, Int>,
+    w1: Tensor<2>,
+}
+
+fn linear_taps(pos: Tensor<2>, len: usize) -> Taps {
+    let f0 = pos.clone().floor();
+    let frac = pos - f0.clone();
+    let f1 = f0.clone().add_scalar(1.0);
+    let max = len as f32 - 1.0;
+    let inside = |f: &Tensor<2>| {
+        f.clone().greater_equal_elem(0.0).float() * f.clone().lower_equal_elem(max).float()
+    };
+    let w0 = (frac.clone().neg().add_scalar(1.0)) * inside(&f0);
+    let w1 = frac * inside(&f1);
+    let i0 = f0.clamp(0.0, max).int();
+    let i1 = f1.clamp(0.0, max).int();
+    Taps { i0, w0, i1, w1 }
+}
+
+fn sample_2d(src: Tensor<2>, t: &Taps) -> Tensor<2> {
+    let v0 = src.clone().gather(1, t.i0.clone());
+    let v1 = src.gather(1, t.i1.clone());
+    v0 * t.w0.clone() + v1 * t.w1.clone()
+}
+
+fn sample_3d(src: Tensor<3>, t: &Taps, g: usize) -> Tensor<3> {
+    let [n, taps] = t.i0.dims();
+    let expand_i = |i: &Tensor<2, Int>| i.clone().reshape([n, 1, taps]).expand([n, g, taps]);
+    let expand_w = |w: &Tensor<2>| w.clone().reshape([n, 1, taps]);
+    let v0 = src.clone().gather(2, expand_i(&t.i0));
+    let v1 = src.gather(2, expand_i(&t.i1));
+    v0 * expand_w(&t.w0) + v1 * expand_w(&t.w1)
+}

@@ -1,0 +1,543 @@
+//! The multi-level ConvGRU update blocks (upstream `core/update.py`): `BasicMultiUpdateBlock`
+//! (the plain stereo block, `update_block`) and `BasicMultiUpdateBlock_mix2` (the dual-branch
+//! blocks `update_block_mix_stereo` and `update_block_mix_mono`, separate weights).
+//!
+//! Hidden states are `[h4, h8, h16]` (`net[0..3]`, 1/4, 1/8, 1/16). The context is, per level,
+//! the three pre-computed GRU biases `[cz, cr, cq]` (upstream `inp_list[i]` =
+//! `context_zqr_convs[i](relu(cnet_i)).split(C)`). Update order: gru16, gru08, motion encoder,
+//! gru04 (quirk: 16→8→4, the coarse levels see the *previous* finer states).
+
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::{PaddingConfig2d, Relu};
+use burn::tensor::activation::{relu, sigmoid, tanh};
+use burn::tensor::module::{avg_pool2d, interpolate};
+use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions};
+use burn::tensor::{Device, Tensor};
+
+fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
+    let p = k / 2;
+    Conv2dConfig::new([c_in, c_out], [k, k])
+        .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
+        .init(device)
+}
+
+/// `pool2x` = `avg_pool2d(k3, s2, p1)`, count_include_pad=True.
+pub fn pool2x(x: Tensor<4>) -> Tensor<4> {
+    avg_pool2d(
+        x,
+        AvgPoolOptions::new([3, 3])
+            .with_stride([2, 2])
+            .with_padding([1, 1])
+            .with_count_include_pad(true),
+    )
+}
+
+/// `interp(x, dest)` = bilinear resize of `x` to the spatial size of `dest`, align_corners=True.
+pub fn interp(x: Tensor<4>, dest: &Tensor<4>) -> Tensor<4> {
+    let [_, _, h, w] = dest.dims();
+    interpolate(
+        x,
+        InterpolateOptions::new(InterpolateMode::Bilinear)
+            .with_align_corners(true)
+            .with_output_size([h, w]),
+    )
+}
+
+/// Per-level GRU context biases `[cz, cr, cq]`.
+pub type GruContext = [Tensor<4>; 3];
+
+/// Upstream `ConvGRU(hidden, input, 3)`: `z = σ(convz([h,x]) + cz)`, `r = σ(convr([h,x]) + cr)`,
+/// `q = tanh(convq([r·h, x]) + cq)`, `h' = (1-z)·h + z·q`.
+#[derive(Module, Debug)]
+pub struct ConvGru {
+    pub convz: Conv2d,
+    pub convr: Conv2d,
+    pub convq: Conv2d,
+}
+
+impl ConvGru {
+    pub fn new(hidden: usize, input: usize, device: &Device) -> Self {
+        Self {
+            convz: conv(hidden + input, hidden, 3, device),
+            convr: conv(hidden + input, hidden, 3, device),
+            convq: conv(hidden + input, hidden, 3, device),
+        }
+    }
+
+    /// `x_list` is concatenated along channels (upstream `*x_list`).
+    pub fn forward(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
+        let x = Tensor::cat(x_list, 1);
+        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
+        let z = sigmoid(self.convz.forward(hx.clone()) + ctx[0].clone());
+        let r = sigmoid(self.convr.forward(hx) + ctx[1].clone());
+        let q = tanh(self.convq.forward(Tensor::cat(vec![r * h.clone(), x], 1)) + ctx[2].clone());
+        (z.clone().neg().add_scalar(1.0)) * h + z * q
+    }
+}
+
+/// Upstream `DispHead(C, 256, 1)`: `conv2(relu(conv1(x)))`, both 3×3.
+#[derive(Module, Debug)]
+pub struct DispHead {
+    pub conv1: Conv2d,
+    pub conv2: Conv2d,
+}
+
+impl DispHead {
+    pub fn new(c_in: usize, device: &Device) -> Self {
+        Self {
+            conv1: conv(c_in, 256, 3, device),
+            conv2: conv(256, 1, 3, device),
+        }
+    }
+
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        self.conv2.forward(relu(self.conv1.forward(x)))
+    }
+}
+
+/// Upstream `BasicMotionEncoder`: `cor = relu(convc2(relu(convc1(corr))))`,
+/// `d = relu(convd2(relu(convd1(disp))))`, `out = relu(conv(cat(cor, d)))` (127 ch),
+/// returns `cat(out, disp)` (128 ch).
+#[derive(Module, Debug)]
+pub struct BasicMotionEncoder {
+    pub convc1: Conv2d,
+    pub convc2: Conv2d,
+    pub convd1: Conv2d,
+    pub convd2: Conv2d,
+    pub conv: Conv2d,
+}
+
+impl BasicMotionEncoder {
+    pub fn new(cor_planes: usize, device: &Device) -> Self {
+        Self {
+            convc1: conv(cor_planes, 64, 1, device),
+            convc2: conv(64, 64, 3, device),
+            convd1: conv(1, 64, 7, device),
+            convd2: conv(64, 64, 3, device),
+            conv: conv(128, 127, 3, device),
+        }
+    }
+
+    pub fn forward(&self, disp: Tensor<4>, corr: Tensor<4>) -> Tensor<4> {
+        let cor = relu(self.convc2.forward(relu(self.convc1.forward(corr))));
+        let d = relu(self.convd2.forward(relu(self.convd1.forward(disp.clone()))));
+        let out = relu(self.conv.forward(Tensor::cat(vec![cor, d], 1)));
+        Tensor::cat(vec![out, disp], 1)
+    }
+}
+
+/// Upstream `BasicMotionEncoder_mix2`: two branches ("own" and `*_mono` = "other") with
+/// `convc1(cat(corr, flaw))` (162+96 → 64), `convc2`, `convd1` (7×7), `convd2`, `conv` 128 → 63;
+/// returns `cat(out, disp, out_o, disp_o)` (128 ch).
+#[derive(Module, Debug)]
+pub struct BasicMotionEncoderMix2 {
+    pub convc1: Conv2d,
+    pub convc2: Conv2d,
+    pub convc1_mono: Conv2d,
+    pub convc2_mono: Conv2d,
+    pub convd1: Conv2d,
+    pub convd2: Conv2d,
+    pub convd1_mono: Conv2d,
+    pub convd2_mono: Conv2d,
+    pub conv: Conv2d,
+    pub conv_mono: Conv2d,
+}
+
+/// The inputs of one branch of the mix encoder.
+#[derive(Debug, Clone)]
+pub struct Branch {
+    /// Disparity `[B,1,h,w]`.
+    pub disp: Tensor<4>,
+    /// Geo lookup `[B,162,h,w]`.
+    pub corr: Tensor<4>,
+    /// `disp_warp(features_right[0], disp) - features_left[0]` `[B,96,h,w]`.
+    pub flaw: Tensor<4>,
+}
+
+impl BasicMotionEncoderMix2 {
+    pub fn new(cor_planes: usize, flaw_planes: usize, device: &Device) -> Self {
+        let c = cor_planes + flaw_planes;
+        Self {
+            convc1: conv(c, 64, 1, device),
+            convc2: conv(64, 64, 3, device),
+            convc1_mono: conv(c, 64, 1, device),
+            convc2_mono: conv(64, 64, 3, device),
+            convd1: conv(1, 64, 7, device),
+            convd2: conv(64, 64, 3, device),
+            convd1_mono: conv(1, 64, 7, device),
+            convd2_mono: conv(64, 64, 3, device),
+            conv: conv(128, 63, 3, device),
+            conv_mono: conv(128, 63, 3, device),
+        }
+    }
+
+    /// `own` goes through the plain weights, `other` through the `*_mono` weights (for the mono
+    /// instance upstream passes the mono branch as `own`).
+    pub fn forward(&self, own: &Branch, other: &Branch) -> Tensor<4> {
+        let cor = relu(
+            self.convc2.forward(relu(
+                self.convc1
+                    .forward(Tensor::cat(vec![own.corr.clone(), own.flaw.clone()], 1)),
+            )),
+        );
+        let cor_o = relu(
+            self.convc2_mono.forward(relu(
+                self.convc1_mono
+                    .forward(Tensor::cat(vec![other.corr.clone(), other.flaw.clone()], 1)),
+            )),
+        );
+        let d = relu(
+            self.convd2
+                .forward(relu(self.convd1.forward(own.disp.clone()))),
+        );
+        let d_o = relu(
+            self.convd2_mono
+                .forward(relu(self.convd1_mono.forward(other.disp.clone()))),
+        );
+        let out = relu(self.conv.forward(Tensor::cat(vec![cor, d], 1)));
+        let out_o = relu(self.conv_mono.forward(Tensor::cat(vec![cor_o, d_o], 1)));
+        Tensor::cat(vec![out, own.disp.clone(), out_o, other.disp.clone()], 1)
+    }
+}
+
+/// What an update block returns: the new hidden states, `mask_feat_4` `[B,32,h,w]` and the
+/// disparity increment `[B,1,h,w]`.
+#[derive(Debug, Clone)]
+pub struct UpdateOut {
+    pub net: [Tensor<4>; 3],
+    pub mask_feat: Tensor<4>,
+    pub delta: Tensor<4>,
+}
+
+/// The GRU stack shared by both block kinds (fields flattened into each block for the keys).
+fn gru_steps(
+    gru16: &ConvGru,
+    gru08: &ConvGru,
+    gru04: &ConvGru,
+    net: [Tensor<4>; 3],
+    inp: &[GruContext; 3],
+    motion: impl FnOnce() -> Tensor<4>,
+) -> [Tensor<4>; 3] {
+    let [h4, h8, h16] = net;
+    let h16 = gru16.forward(h16, &inp[2], vec![pool2x(h8.clone())]);
+    let h8 = gru08.forward(
+        h8.clone(),
+        &inp[1],
+        vec![pool2x(h4.clone()), interp(h16.clone(), &h8)],
+    );
+    let m = motion();
+    let h4 = gru04.forward(h4.clone(), &inp[0], vec![m, interp(h8.clone(), &h4)]);
+    [h4, h8, h16]
+}
+
+/// `mask_feat_4 = nn.Sequential(Conv2d(C, 32, 3, p1), ReLU)` → keys `mask_feat_4.0.*`.
+fn mask_feat_init(hidden: usize, device: &Device) -> (Conv2d, Relu) {
+    (conv(hidden, 32, 3, device), Relu::new())
+}
+
+/// Upstream `BasicMultiUpdateBlock` (n_gru_layers = 3, all hidden dims equal to `hidden`).
+#[derive(Module, Debug)]
+pub struct BasicMultiUpdateBlock {
+    pub encoder: BasicMotionEncoder,
+    pub gru04: ConvGru,
+    pub gru08: ConvGru,
+    pub gru16: ConvGru,
+    pub disp_head: DispHead,
+    pub mask_feat_4: (Conv2d, Relu),
+}
+
+impl BasicMultiUpdateBlock {
+    /// `cor_planes` = levels·(2r+1)·9 (162 for MonSter).
+    pub fn new(hidden: usize, cor_planes: usize, device: &Device) -> Self {
+        Self {
+            encoder: BasicMotionEncoder::new(cor_planes, device),
+            gru04: ConvGru::new(hidden, 128 + hidden, device),
+            gru08: ConvGru::new(hidden, 2 * hidden, device),
+            gru16: ConvGru::new(hidden, hidden, device),
+            disp_head: DispHead::new(hidden, device),
+            mask_feat_4: mask_feat_init(hidden, device),
+        }
+    }
+
+    /// `net` = `[h4, h8, h16]`, `corr` = geo lookup at `disp`.
+    pub fn forward(
+        &self,
+        net: [Tensor<4>; 3],
+        inp: &[GruContext; 3],
+        corr: Tensor<4>,
+        disp: Tensor<4>,
+    ) -> UpdateOut {
+        let net = gru_steps(&self.gru16, &self.gru08, &self.gru04, net, inp, || {
+            self.encoder.forward(disp, corr)
+        });
+        let delta = self.disp_head.forward(net[0].clone());
+        let mask_feat = relu(self.mask_feat_4.0.forward(net[0].clone()));
+        UpdateOut {
+            net,
+            mask_feat,
+            delta,
+        }
+    }
+}
+
+/// Upstream `BasicMultiUpdateBlock_mix2` (the dual-branch block; one instance per branch).
+#[derive(Module, Debug)]
+pub struct BasicMultiUpdateBlockMix2 {
+    pub encoder: BasicMotionEncoderMix2,
+    pub gru04: ConvGru,
+    pub gru08: ConvGru,
+    pub gru16: ConvGru,
+    pub disp_head: DispHead,
+    pub mask_feat_4: (Conv2d, Relu),
+}
+
+impl BasicMultiUpdateBlockMix2 {
+    /// `cor_planes` = 162, `flaw_planes` = 96 (channels of `features_left[0]`).
+    pub fn new(hidden: usize, cor_planes: usize, flaw_planes: usize, device: &Device) -> Self {
+        Self {
+            encoder: BasicMotionEncoderMix2::new(cor_planes, flaw_planes, device),
+            gru04: ConvGru::new(hidden, 128 + hidden, device),
+            gru08: ConvGru::new(hidden, 2 * hidden, device),
+            gru16: ConvGru::new(hidden, hidden, device),
+            disp_head: DispHead::new(hidden, device),
+            mask_feat_4: mask_feat_init(hidden, device),
+        }
+    }
+
+    /// `own`: this instance's branch (stereo for `update_block_mix_stereo`, mono for
+    /// `update_block_mix_mono`); `other`: the other branch.
+    pub fn forward(
+        &self,
+        net: [Tensor<4>; 3],
+        inp: &[GruContext; 3],
+        own: &Branch,
+        other: &Branch,
+    ) -> UpdateOut {
+        let net = gru_steps(&self.gru16, &self.gru08, &self.gru04, net, inp, || {
+            self.encoder.forward(own, other)
+        });
+        let delta = self.disp_head.forward(net[0].clone());
+        let mask_feat = relu(self.mask_feat_4.0.forward(net[0].clone()));
+        UpdateOut {
+            net,
+            mask_feat,
+            delta,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The iteration driver (upstream `Monster.forward`, the `for itr in range(iters)` loop).
+// ---------------------------------------------------------------------------------------------
+
+use burn::nn::conv::ConvTranspose2d;
+
+use super::geometry::GeoEncodingVolume;
+use super::remp::Remp;
+use super::scale_shift::align_mono;
+use super::upsample::{upsample_disp, Conv2x};
+use super::warp::disp_warp;
+
+/// The modules the loop uses (borrowed from the assembled model; their state-dict prefixes are
+/// `update_block`, `update_block_mix_stereo`, `update_block_mix_mono`, `spx_2_gru`,
+/// `spx_gru.0`, `REMP`).
+#[derive(Debug, Clone, Copy)]
+pub struct IterationBlocks<'a> {
+    pub update_block: &'a BasicMultiUpdateBlock,
+    pub update_block_mix_stereo: &'a BasicMultiUpdateBlockMix2,
+    pub update_block_mix_mono: &'a BasicMultiUpdateBlockMix2,
+    pub spx_2_gru: &'a Conv2x,
+    pub spx_gru: &'a ConvTranspose2d,
+    pub remp: &'a Remp,
+}
+
+/// The prepared inputs of the loop.
+#[derive(Debug, Clone)]
+pub struct IterationInputs {
+    /// Built from `match_left`, `match_right` (`desc(conv(features[0]))`) and `cost_agg`'s output.
+    pub geo: GeoEncodingVolume,
+    /// `[B,1,h,w]` soft-argmin of the classifier (1/4-resolution pixels).
+    pub init_disp: Tensor<4>,
+    /// `[B,1,h,w]` = `interpolate(depth_mono, (h, w), bilinear, align_corners=False)`.
+    pub disp_mono_4x: Tensor<4>,
+    /// Initial hidden states `[tanh(cnet_4x), tanh(cnet_8x), tanh(cnet_16x)]`; the mono branch
+    /// starts from a copy of these (upstream clones them before the loop).
+    pub net: [Tensor<4>; 3],
+    /// Per level `[cz, cr, cq]` = `context_zqr_convs[i](relu(cnet_i)).split(C)`.
+    pub inp: [GruContext; 3],
+    /// `features_left[0]`, `features_right[0]` = `cat(f4, stem_4x)` `[B,96,h,w]`.
+    pub features_left0: Tensor<4>,
+    pub features_right0: Tensor<4>,
+    /// `stem_2x` of the left image `[B,32,H/2,W/2]`.
+    pub stem_2x: Tensor<4>,
+    /// Normalised images `2·(img/255) - 1`, `[B,3,H,W]` (for REMP).
+    pub image1: Tensor<4>,
+    pub image2: Tensor<4>,
+}
+
+/// Result of the loop.
+#[derive(Debug, Clone)]
+pub struct IterationOutput {
+    /// The final full-resolution disparity `disp_up + REMP(mono_up, disp_up, img1, img2)`
+    /// `[B,1,H,W]` (upstream's test-mode return value).
+    pub disp: Tensor<4>,
+    /// Train mode: every prediction in upstream order (`iters-7` stereo predictions, then per
+    /// dual-branch iteration `[mono_up, stereo_up]`; the last one equals `disp`). Empty in test
+    /// mode.
+    pub disp_preds: Vec<Tensor<4>>,
+    /// `(scale, shift)` per batch sample of the mono alignment (empty if `iters < 7`).
+    pub scale_shift: Vec<(f32, f32)>,
+}
+
+/// Runs the `iters` refinement iterations. See [`iterate_traced`].
+pub fn iterate(
+    blocks: &IterationBlocks<'_>,
+    inputs: IterationInputs,
+    iters: usize,
+    test_mode: bool,
+) -> IterationOutput {
+    iterate_traced(blocks, inputs, iters, test_mode, &mut |_, _| {})
+}
+
+/// [`iterate`] with a trace callback receiving intermediates under the parity fixture's names
+/// (`geo_feat.N`, `feat_warp.N`, `update_block.delta.N`, `update_block.{mask_feat,net0,net1,net2}.N`,
+/// `update_block_mix_{stereo,mono}.…`, `upsample_disp.N`, `REMP.0`; `N` counts calls). In test
+/// mode the skipped upsamplings are not traced.
+pub fn iterate_traced(
+    blocks: &IterationBlocks<'_>,
+    inputs: IterationInputs,
+    iters: usize,
+    test_mode: bool,
+    trace: &mut dyn FnMut(&str, &Tensor<4>),
+) -> IterationOutput {
+    let IterationInputs {
+        geo,
+        init_disp,
+        mut disp_mono_4x,
+        net,
+        inp,
+        features_left0,
+        features_right0,
+        stem_2x,
+        image1,
+        image2,
+    } = inputs;
+    let mut counts = std::collections::HashMap::<String, usize>::new();
+    let mut emit = |name: &str, t: &Tensor<4>| {
+        let n = counts.entry(name.to_string()).or_insert(0);
+        trace(&format!("{name}.{n}"), t);
+        *n += 1;
+    };
+    let emit_block = |prefix: &str, out: &UpdateOut, emit: &mut dyn FnMut(&str, &Tensor<4>)| {
+        emit(&format!("{prefix}.delta"), &out.delta);
+        emit(&format!("{prefix}.mask_feat"), &out.mask_feat);
+        for (i, n) in out.net.iter().enumerate() {
+            emit(&format!("{prefix}.net{i}"), n);
+        }
+    };
+
+    let n = iters as i64;
+    let mut net_list = net.clone();
+    let mut net_mono = net;
+    let mut disp = init_disp;
+    let mut disp_preds = Vec::new();
+    let mut scale_shift = Vec::new();
+    let mut mono_up: Option<Tensor<4>> = None;
+    let mut disp_up: Option<Tensor<4>> = None;
+    for itr in 0..n {
+        disp = disp.detach();
+        if itr >= 1 {
+            disp_mono_4x = disp_mono_4x.detach();
+        }
+        let geo_feat = geo.lookup(&disp);
+        emit("geo_feat", &geo_feat);
+        let out = if itr <= n - 8 {
+            let out = blocks
+                .update_block
+                .forward(net_list, &inp, geo_feat, disp.clone());
+            emit_block("update_block", &out, &mut emit);
+            out
+        } else {
+            if itr == n - 7 {
+                let (aligned, params) = align_mono(disp_mono_4x, &disp);
+                disp_mono_4x = aligned;
+                scale_shift = params;
+            }
+            let warped_mono = disp_warp(features_right0.clone(), disp_mono_4x.clone());
+            emit("feat_warp", &warped_mono);
+            let flaw_mono = warped_mono - features_left0.clone();
+            let warped_stereo = disp_warp(features_right0.clone(), disp.clone());
+            emit("feat_warp", &warped_stereo);
+            let flaw_stereo = warped_stereo - features_left0.clone();
+            let geo_feat_mono = geo.lookup(&disp_mono_4x);
+            let stereo = Branch {
+                disp: disp.clone(),
+                corr: geo_feat,
+                flaw: flaw_stereo,
+            };
+            let mono = Branch {
+                disp: disp_mono_4x.clone(),
+                corr: geo_feat_mono,
+                flaw: flaw_mono,
+            };
+            let out = blocks
+                .update_block_mix_stereo
+                .forward(net_list, &inp, &stereo, &mono);
+            emit_block("update_block_mix_stereo", &out, &mut emit);
+            let out_m = blocks
+                .update_block_mix_mono
+                .forward(net_mono, &inp, &mono, &stereo);
+            emit_block("update_block_mix_mono", &out_m, &mut emit);
+            disp_mono_4x = disp_mono_4x + out_m.delta;
+            net_mono = out_m.net;
+            if !test_mode || itr == n - 1 {
+                let up = upsample_disp(
+                    blocks.spx_2_gru,
+                    blocks.spx_gru,
+                    disp_mono_4x.clone(),
+                    out_m.mask_feat,
+                    stem_2x.clone(),
+                );
+                emit("upsample_disp", &up);
+                if !test_mode {
+                    disp_preds.push(up.clone());
+                }
+                mono_up = Some(up);
+            }
+            out
+        };
+        net_list = out.net;
+        disp = disp + out.delta;
+        if test_mode && itr < n - 1 {
+            continue;
+        }
+        let mut up = upsample_disp(
+            blocks.spx_2_gru,
+            blocks.spx_gru,
+            disp.clone(),
+            out.mask_feat,
+            stem_2x.clone(),
+        );
+        emit("upsample_disp", &up);
+        if itr == n - 1 {
+            let mono = mono_up
+                .clone()
+                .expect("the last iteration is a dual-branch one");
+            let refined = blocks
+                .remp
+                .forward(mono, up.clone(), image1.clone(), image2.clone());
+            emit("REMP", &refined);
+            up = up + refined; // quirk 4: disp_up + LeakyReLU(disp_up + residual)
+        }
+        if !test_mode {
+            disp_preds.push(up.clone());
+        }
+        disp_up = Some(up);
+    }
+    IterationOutput {
+        disp: disp_up.expect("iters >= 1"),
+        disp_preds,
+        scale_shift,
+    }
+}

@@ -1,0 +1,73 @@
+//! Reading the upstream parity fixtures (`../shared/fixtures/*`) in place.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use safetensors::{Dtype, SafeTensors};
+
+/// Folder of a fixture set, e.g. `fixture_dir("monsterpp-tiny")`. Fails loudly when absent: the
+/// fixtures are part of the test environment, a skipped parity test would prove nothing.
+pub fn fixture_dir(name: &str) -> PathBuf {
+    let dir = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/fixtures"
+    ))
+    .join(name);
+    assert!(
+        dir.is_dir(),
+        "fixture folder {} is missing (the tests read ../shared beside the repository)",
+        dir.display()
+    );
+    dir
+}
+
+/// All tensors of a safetensors file as (shape, f32 values); F16/BF16/F32 are converted, integer
+/// tensors are skipped.
+pub fn read_all(path: &std::path::Path) -> Vec<(String, Vec<usize>, Vec<f32>)> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let st = SafeTensors::deserialize(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut out = Vec::new();
+    for (name, view) in st.tensors() {
+        let data = view.data();
+        let values: Vec<f32> = match view.dtype() {
+            Dtype::F32 => data
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            Dtype::F16 => data
+                .chunks_exact(2)
+                .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
+                .collect(),
+            Dtype::BF16 => data
+                .chunks_exact(2)
+                .map(|b| half::bf16::from_le_bytes([b[0], b[1]]).to_f32())
+                .collect(),
+            _ => continue,
+        };
+        out.push((name, view.shape().to_vec(), values));
+    }
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+/// One tensor of a fixture file by name, as (shape, values).
+pub fn tensor(fixture: &str, file: &str, name: &str) -> (Vec<usize>, Vec<f32>) {
+    let path = fixture_dir(fixture).join(file);
+    read_all(&path)
+        .into_iter()
+        .find(|(n, _, _)| n == name)
+        .map(|(_, s, v)| (s, v))
+        .unwrap_or_else(|| panic!("{} has no tensor {name}", path.display()))
+}
+
+/// Max absolute difference and the max absolute reference value (for relative checks).
+pub fn max_abs_diff(got: &[f32], want: &[f32]) -> (f32, f32) {
+    assert_eq!(got.len(), want.len(), "lengths differ");
+    let diff = got
+        .iter()
+        .zip(want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+    (diff, scale)
+}
