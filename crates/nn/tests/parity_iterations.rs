@@ -6,7 +6,8 @@
 
 mod support;
 
-use std::collections::HashMap;
+use support::Fixture;
+
 
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d};
@@ -14,7 +15,7 @@ use burn::nn::PaddingConfig2d;
 use burn::tensor::activation::{relu, tanh};
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
 use nn::monster::features::BasicConvIn;
 use nn::monster::geometry::GeoEncodingVolume;
@@ -32,43 +33,8 @@ const FIXTURE: &str = "monsterpp-tiny";
 const HIDDEN: usize = 32;
 const ITERS: usize = 8;
 
-struct Fixture {
-    tensors: HashMap<String, (Vec<usize>, Vec<f32>)>,
-    device: Device,
-}
 
 impl Fixture {
-    fn load() -> Self {
-        let path = support::fixture_dir(FIXTURE).join("tensors.safetensors");
-        let tensors = support::read_all(&path)
-            .into_iter()
-            .map(|(n, s, v)| (n, (s, v)))
-            .collect();
-        Self {
-            tensors,
-            device: Device::flex(),
-        }
-    }
-
-    fn raw(&self, name: &str) -> &(Vec<usize>, Vec<f32>) {
-        self.tensors
-            .get(name)
-            .unwrap_or_else(|| panic!("fixture has no tensor {name}"))
-    }
-
-    fn t<const N: usize>(&self, name: &str) -> Tensor<N> {
-        let (shape, values) = self.raw(name);
-        assert_eq!(shape.len(), N, "{name}: rank {} expected {N}", shape.len());
-        Tensor::from_data(TensorData::new(values.clone(), shape.clone()), &self.device)
-    }
-
-    fn image(&self, side: &str) -> Tensor<4> {
-        self.t::<4>(&format!("input.{side}"))
-            .div_scalar(255.0)
-            .mul_scalar(2.0)
-            .sub_scalar(1.0)
-    }
-
     /// Max abs error of `got` against fixture tensor `name` (shapes must agree).
     fn err<const N: usize>(&self, got: &Tensor<N>, name: &str) -> (f32, f32) {
         let (shape, want) = self.raw(name);
@@ -216,7 +182,7 @@ fn check_scale_shift(got: (f32, f32), want: &[f32]) {
 /// Each stage fed with fixture tensors (no error accumulation).
 #[test]
 fn stages_in_isolation() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let dev = fx.device.clone();
     let parts = Parts::load(&dev);
     let inp = inputs(&fx, &parts);
@@ -276,7 +242,7 @@ fn stages_in_isolation() {
 /// test mode (the output disparity).
 #[test]
 fn iterations_end_to_end() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let dev = fx.device.clone();
     let parts = Parts::load(&dev);
     let blocks = parts.blocks();
@@ -325,7 +291,7 @@ fn iterations_end_to_end() {
 /// disparity reaches every block, with finite gradients.
 #[test]
 fn iterations_backward_smoke() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let ad = fx.device.clone().autodiff();
     // Load on the autodiff device: a module loaded on the plain device and moved with
     // `to_device(&ad)` has untracked parameters (backward panics).

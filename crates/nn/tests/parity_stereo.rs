@@ -5,12 +5,13 @@
 
 mod support;
 
-use std::collections::HashMap;
+use support::Fixture;
+
 
 use burn::module::Module;
 use burn::tensor::activation::softmax;
 use burn::tensor::ops::PadMode;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
 use nn::monster::context::ContextNet;
 use nn::monster::cost::{
@@ -26,44 +27,8 @@ const HIDDEN: usize = 32;
 /// max_disp / 4 of the tiny fixture.
 const D: usize = 16;
 
-struct Fixture {
-    tensors: HashMap<String, (Vec<usize>, Vec<f32>)>,
-    device: Device,
-}
 
 impl Fixture {
-    fn load() -> Self {
-        let path = support::fixture_dir(FIXTURE).join("tensors.safetensors");
-        let tensors = support::read_all(&path)
-            .into_iter()
-            .map(|(n, s, v)| (n, (s, v)))
-            .collect();
-        Self {
-            tensors,
-            device: Device::flex(),
-        }
-    }
-
-    fn raw(&self, name: &str) -> &(Vec<usize>, Vec<f32>) {
-        self.tensors
-            .get(name)
-            .unwrap_or_else(|| panic!("fixture has no tensor {name}"))
-    }
-
-    fn t<const N: usize>(&self, name: &str) -> Tensor<N> {
-        let (shape, values) = self.raw(name);
-        assert_eq!(shape.len(), N, "{name}: rank {} expected {N}", shape.len());
-        Tensor::from_data(TensorData::new(values.clone(), shape.clone()), &self.device)
-    }
-
-    /// `2·img/255 − 1` of `input.left` / `input.right`.
-    fn image(&self, side: &str) -> Tensor<4> {
-        self.t::<4>(&format!("input.{side}"))
-            .div_scalar(255.0)
-            .mul_scalar(2.0)
-            .sub_scalar(1.0)
-    }
-
     fn dpt(&self, side: &str) -> [Tensor<4>; 4] {
         std::array::from_fn(|i| self.t(&format!("inter.dpt_feat_{side}_{i}.0")))
     }
@@ -99,7 +64,7 @@ fn load<M: Module>(mut m: M) -> M {
 
 #[test]
 fn stereo_features() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let feats = load(StereoFeatures::new(DPT_F, &fx.device));
 
     for (side, idx) in [("left", 0), ("right", 1)] {
@@ -143,7 +108,7 @@ fn stereo_features() {
 
 #[test]
 fn cost_volume_and_init_disp() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let feats = load(StereoFeatures::new(DPT_F, &fx.device));
     let cost = load(CostAggregation::new(&fx.device));
 
@@ -258,7 +223,7 @@ fn context_upsample_ref(disp: Tensor<4>, weights: Tensor<4>) -> Tensor<4> {
 
 #[test]
 fn spx_init_disp_up() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let spx = load(SpxHead::new(&fx.device));
     let f0 = Tensor::cat(
         vec![
@@ -275,7 +240,7 @@ fn spx_init_disp_up() {
 
 #[test]
 fn context() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let ctx = load(ContextNet::new(DPT_F, HIDDEN, &fx.device));
     let stems = [
         fx.t("inter.stem_4.0"),
@@ -312,7 +277,7 @@ fn context() {
 /// context) on the autodiff device; BN layers run in burn's training mode there.
 #[test]
 fn gradients_flow() {
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIXTURE);
     let dev = Device::flex().autodiff();
     let feats = load(StereoFeatures::new(DPT_F, &dev));
     let cost = load(CostAggregation::new(&dev));

@@ -3,6 +3,9 @@
 
 use std::path::PathBuf;
 
+use std::collections::HashMap;
+
+use burn::tensor::{Device, Tensor, TensorData};
 use safetensors::{Dtype, SafeTensors};
 
 /// Folder of a fixture set, e.g. `fixture_dir("monsterpp-tiny")`. Fails loudly when absent: the
@@ -70,4 +73,35 @@ pub fn max_abs_diff(got: &[f32], want: &[f32]) -> (f32, f32) {
         .fold(0.0f32, f32::max);
     let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
     (diff, scale)
+}
+
+/// The reference tensors of a fixture set, loaded once, handed out as burn tensors on `device`.
+pub struct Fixture {
+    pub tensors: HashMap<String, (Vec<usize>, Vec<f32>)>,
+    pub device: Device,
+}
+
+impl Fixture {
+    /// `tensors.safetensors` of fixture set `name`, on the flex CPU device.
+    pub fn load(name: &str) -> Self {
+        let path = fixture_dir(name).join("tensors.safetensors");
+        let tensors = read_all(&path).into_iter().map(|(n, s, v)| (n, (s, v))).collect();
+        Self { tensors, device: Device::flex() }
+    }
+
+    pub fn raw(&self, name: &str) -> &(Vec<usize>, Vec<f32>) {
+        self.tensors.get(name).unwrap_or_else(|| panic!("fixture has no tensor {name}"))
+    }
+
+    /// Tensor `name` with its rank checked.
+    pub fn t<const N: usize>(&self, name: &str) -> Tensor<N> {
+        let (shape, values) = self.raw(name);
+        assert_eq!(shape.len(), N, "{name}: rank {} expected {N}", shape.len());
+        Tensor::from_data(TensorData::new(values.clone(), shape.clone()), &self.device)
+    }
+
+    /// `2·img/255 − 1` of `input.left` / `input.right`, as the network normalises its inputs.
+    pub fn image(&self, side: &str) -> Tensor<4> {
+        self.t::<4>(&format!("input.{side}")).div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0)
+    }
 }
