@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use matching::{Paths, SgmParams};
 use pipeline::demo::{percent, pixels, run_demo, DemoOptions};
-use pipeline::predict::{predict_sgm, read_pair, write_disparity};
+use pipeline::predict::{predict_monster, predict_sgm, read_pair, write_disparity};
 use pipeline::progress::track;
 
 #[derive(Parser)]
@@ -147,7 +147,26 @@ impl RectifyArgs {
     }
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum Model {
+    /// MonSter++ (accuracy model), weights from --weights.
+    Monsterpp,
+}
+
 #[derive(Args)]
+#[command(
+    after_help = "Methods: census + SGM by default (--method sgm, needs a disparity range); the \
+    MonSter++ network with --model monsterpp --weights FILE (the released .pth checkpoints are \
+    --config vitl; no range needed, disparities up to --max-disp).\n\n\
+    MonSter++ expects 8-bit RGB values (0–255): grey images are repeated to RGB, alpha is dropped; \
+    rescale uint16 satellite images with --normalise percentile (2–98th percentile → 0–255). \
+    Pixels with NaN in the left image are NaN in the output. Sizes are padded to multiples of 32 \
+    (replicate, as upstream). One forward pass may use at most --max-memory; larger pairs are cut \
+    into overlapping strips of full rows (epipolar lines) that are blended.\n\n\
+    Examples:\n  seasonstereo predict --method sgm --range 0:48 L.iio R.iio -o d.iio\n  \
+    seasonstereo predict --model monsterpp --weights mix_all.pth --config vitl --iters 32 \
+    L.iio R.iio -o d.iio --color d.png"
+)]
 struct PredictArgs {
     /// Left image of the rectified pair (.iio/.npy, .tif, .png, .pfm).
     left: PathBuf,
@@ -157,18 +176,80 @@ struct PredictArgs {
     /// (NaN = invalid); .png writes a colour-mapped picture.
     #[arg(short, long)]
     output: PathBuf,
-    /// Matching method.
+    /// Matching method (when no --model is given).
     #[arg(long, value_enum, default_value_t = Method::Sgm)]
     method: Method,
+    #[command(flatten)]
+    net: NetworkArgs,
     /// Disparity search range MIN:MAX (inclusive, pixels), e.g. from the cameras and an altitude
-    /// range. Estimated from the images when absent (less reliable on multi-date pairs).
-    #[arg(long, value_parser = parse_range, allow_hyphen_values = true)]
+    /// range. Estimated from the images when absent (less reliable on multi-date pairs). SGM only.
+    #[arg(long, value_parser = parse_range, allow_hyphen_values = true, conflicts_with = "model")]
     range: Option<(i32, i32)>,
     /// Also write a colour-mapped picture of the disparity to this PNG.
     #[arg(long)]
     color: Option<PathBuf>,
     #[command(flatten)]
     sgm: SgmArgs,
+}
+
+/// The stereo network options shared by `predict` and `eval`.
+#[derive(Args)]
+struct NetworkArgs {
+    /// Use a stereo network instead of the classical matcher.
+    #[arg(long, value_enum, requires = "weights")]
+    model: Option<Model>,
+    /// Network weights: an upstream MonSter++ .pth checkpoint or safetensors.
+    #[arg(long, value_name = "FILE", requires = "model")]
+    weights: Option<PathBuf>,
+    /// Network configuration matching the weights: vitl (released checkpoints), vitb, vits, tiny.
+    #[arg(long = "config", value_name = "PRESET", default_value = "vitl",
+          value_parser = ["vitl", "vitb", "vits", "tiny"])]
+    net_config: String,
+    /// Refinement iterations of the network (≥ 7). Default: 32 (8 for tiny).
+    #[arg(long, value_name = "N")]
+    iters: Option<usize>,
+    /// Maximum disparity of the network, a multiple of 32, pixels. Default: 416 (64 for tiny).
+    #[arg(long, value_name = "PX")]
+    max_disp: Option<usize>,
+    /// Input values for the network: as-is (0–255 data), percentile (2–98th percentile of each
+    /// image → 0–255, for uint16 imagery) or percentile:LO:HI.
+    #[arg(long, value_name = "MODE", default_value = "as-is",
+          value_parser = nn::infer::Normalisation::parse)]
+    normalise: nn::infer::Normalisation,
+    /// Peak memory of one network pass, GiB; larger pairs are cut into strips of rows.
+    #[arg(long, value_name = "GIB", default_value_t = 8.0)]
+    max_memory: f64,
+    /// Cut the pair into strips of ROWS rows for the network, whatever the memory budget.
+    #[arg(long, value_name = "ROWS")]
+    tile: Option<usize>,
+    /// Overlap of consecutive strips, rows (blended linearly).
+    #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP)]
+    tile_overlap: usize,
+    /// Where the network runs: auto, cpu, wgpu or cuda (GPU backends need the build features
+    /// `wgpu` / `cuda`).
+    #[arg(long, default_value = "auto")]
+    device: String,
+}
+
+impl NetworkArgs {
+    fn monster_options(&self) -> Result<pipeline::predict::MonsterOptions> {
+        let weights = self
+            .weights
+            .clone()
+            .context("--weights is required with --model")?;
+        if self.max_memory.is_nan() || self.max_memory <= 0.0 {
+            bail!("--max-memory must be positive (got {})", self.max_memory);
+        }
+        let mut o = pipeline::predict::MonsterOptions::new(weights, &self.net_config);
+        o.iters = self.iters;
+        o.max_disp = self.max_disp;
+        o.normalisation = self.normalise;
+        o.memory_budget = (self.max_memory * (1u64 << 30) as f64) as u64;
+        o.tile_rows = self.tile;
+        o.tile_overlap = self.tile_overlap;
+        o.device = self.device.clone();
+        Ok(o)
+    }
 }
 
 #[derive(Args)]
@@ -258,11 +339,11 @@ struct EvalArgs {
     /// Folder of the ground truth <AOI>_DSM.tif, <AOI>_CLS.tif, <AOI>_WATER.png.
     #[arg(long, value_name = "DIR", required_unless_present = "world")]
     truth_dir: Option<PathBuf>,
-    /// Compute the disparities with this method...
+    /// Compute the disparities with this method (or with --model)...
     #[arg(long, value_enum, default_value_t = EvalMethod::Sgm)]
     method: EvalMethod,
     /// ...or read them from DIR/[<SPLIT>/]<stem>.{iio,npy,tif,pfm} (full rectified or crop size).
-    #[arg(long, value_name = "DIR", conflicts_with = "method")]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["method", "model"])]
     predictions: Option<PathBuf>,
     /// Row name of the method in the CSV and Table 1 (default: from the method or DIR).
     #[arg(long)]
@@ -290,6 +371,8 @@ struct EvalArgs {
     omaha_max_disparity: f64,
     #[command(flatten)]
     sgm: SgmArgs,
+    #[command(flatten)]
+    net: NetworkArgs,
 }
 
 fn parse_range(s: &str) -> Result<(i32, i32), String> {
@@ -375,9 +458,28 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Predict(a) => {
             let (left, right) = read_pair(&a.left, &a.right)?;
-            let params = a.sgm.params()?;
-            let (disparity, (lo, hi)) = match a.method {
-                Method::Sgm => predict_sgm(&left, &right, a.range, &params, &progress)?,
+            let (disparity, what) = match a.net.model {
+                Some(Model::Monsterpp) => {
+                    let opts = a.net.monster_options()?;
+                    eprintln!(
+                        "loading MonSter++ `{}` from {}",
+                        opts.preset,
+                        opts.weights.display()
+                    );
+                    let predictor = opts.load()?;
+                    let d = predict_monster(&predictor, &left, &right, &progress)?;
+                    (
+                        d,
+                        format!("MonSter++ {}, {} iterations", opts.preset, predictor.iters),
+                    )
+                }
+                None => {
+                    let params = a.sgm.params()?;
+                    let (d, (lo, hi)) = match a.method {
+                        Method::Sgm => predict_sgm(&left, &right, a.range, &params, &progress)?,
+                    };
+                    (d, format!("range {lo}..{hi} px"))
+                }
             };
             write_disparity(&a.output, &disparity)
                 .with_context(|| format!("writing {}", a.output.display()))?;
@@ -387,7 +489,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             let valid = disparity.data().iter().filter(|v| v.is_finite()).count();
             println!(
-                "wrote {} (range {lo}..{hi} px, {:.1} % of pixels matched)",
+                "wrote {} ({what}, {:.1} % of pixels matched)",
                 a.output.display(),
                 100.0 * valid as f64 / disparity.data().len().max(1) as f64
             );
@@ -418,6 +520,18 @@ fn run(cli: Cli) -> Result<()> {
             use pipeline::eval::{evaluate, AoiRule, EvalOptions, Method as M};
             let method = match (&a.predictions, a.method) {
                 (Some(dir), _) => M::Predictions(dir.clone()),
+                (None, _) if a.net.model.is_some() => {
+                    let o = a.net.monster_options()?;
+                    eprintln!(
+                        "loading MonSter++ `{}` from {}",
+                        o.preset,
+                        o.weights.display()
+                    );
+                    M::Network(pipeline::eval::Network {
+                        name: format!("MonSter++ ({})", o.preset),
+                        predictor: std::sync::Arc::new(o.load()?),
+                    })
+                }
                 (None, EvalMethod::Sgm) => M::Sgm(a.sgm.params()?),
                 (None, EvalMethod::GroundTruth) => M::GroundTruth,
             };

@@ -282,3 +282,160 @@ fn dsm_errors_name_the_file() {
         "nothing written on error"
     );
 }
+
+/// `../shared/fixtures/monsterpp-tiny` beside the repository (part of the test environment).
+fn monster_fixture() -> std::path::PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/fixtures/monsterpp-tiny");
+    assert!(dir.is_dir(), "fixture folder {} is missing", dir.display());
+    dir
+}
+
+/// An f32 tensor of the fixture's tensors.safetensors: (shape, values).
+fn fixture_tensor(name: &str) -> (Vec<usize>, Vec<f32>) {
+    let bytes = std::fs::read(monster_fixture().join("tensors.safetensors")).unwrap();
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let view = st.tensor(name).unwrap();
+    assert_eq!(view.dtype(), safetensors::Dtype::F32, "{name}");
+    let values = view
+        .data()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    (view.shape().to_vec(), values)
+}
+
+/// The fixture's 1×3×H×W input written as an (H, W, 3) `.iio`.
+fn write_fixture_image(name: &str, path: &Path) {
+    let (shape, v) = fixture_tensor(name);
+    let (h, w) = (shape[2], shape[3]);
+    let mut data = vec![0f32; h * w * 3];
+    for c in 0..3 {
+        for i in 0..h * w {
+            data[i * 3 + c] = v[c * h * w + i];
+        }
+    }
+    raster::write_image(path, &raster::Image::new(w, h, 3, data).unwrap()).unwrap();
+}
+
+#[test]
+fn predict_monsterpp_reproduces_the_upstream_fixture() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r, out) = (
+        dir.path().join("L.iio"),
+        dir.path().join("R.iio"),
+        dir.path().join("out.iio"),
+    );
+    write_fixture_image("input.left", &l);
+    write_fixture_image("input.right", &r);
+    let weights = monster_fixture().join("weights.safetensors");
+    let o = seasonstereo(&[
+        "predict",
+        "--model",
+        "monsterpp",
+        "--weights",
+        weights.to_str().unwrap(),
+        "--config",
+        "tiny",
+        "--iters",
+        "8",
+        l.to_str().unwrap(),
+        r.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("MonSter++ tiny"), "{stdout}");
+    let d = raster::read_image(&out).unwrap();
+    assert_eq!((d.width(), d.height(), d.channels()), (128, 64, 1));
+    let (_, want) = fixture_tensor("output.disp");
+    let err = d
+        .data()
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(err <= 1e-3, "max abs error {err} px");
+}
+
+#[test]
+fn predict_monsterpp_errors_name_the_file_and_the_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r, out) = (
+        dir.path().join("L.iio"),
+        dir.path().join("R.iio"),
+        dir.path().join("out.iio"),
+    );
+    write_fixture_image("input.left", &l);
+    write_fixture_image("input.right", &r);
+    let run = |weights: &str, config: &str| {
+        seasonstereo(&[
+            "predict",
+            "--model",
+            "monsterpp",
+            "--weights",
+            weights,
+            "--config",
+            config,
+            l.to_str().unwrap(),
+            r.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
+    let missing = dir.path().join("mix_all.pth");
+    let o = run(missing.to_str().unwrap(), "vitl");
+    assert!(!o.status.success());
+    let msg = stderr(&o);
+    assert!(
+        msg.contains("mix_all.pth") && msg.contains("no such file"),
+        "{msg}"
+    );
+
+    let weights = monster_fixture().join("weights.safetensors");
+    let o = run(weights.to_str().unwrap(), "vits");
+    assert!(!o.status.success());
+    let msg = stderr(&o);
+    assert!(
+        msg.contains("do not fit") && msg.contains("`vits`"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("mono_encoder.") && msg.contains("wrong shape"),
+        "names the keys: {msg}"
+    );
+    assert!(
+        msg.contains("--config tiny"),
+        "suggests the right preset: {msg}"
+    );
+    assert!(!out.exists());
+
+    // --model needs --weights; --range belongs to SGM.
+    let o = seasonstereo(&[
+        "predict",
+        "--model",
+        "monsterpp",
+        "a.iio",
+        "b.iio",
+        "-o",
+        "d.iio",
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--weights"),
+        "{}",
+        stderr(&o)
+    );
+    let help = seasonstereo(&["predict", "--help"]);
+    let help = String::from_utf8_lossy(&help.stdout);
+    for flag in [
+        "--model",
+        "--weights",
+        "--config",
+        "--iters",
+        "--max-disp",
+        "--normalise",
+        "--tile",
+    ] {
+        assert!(help.contains(flag), "{flag} missing from predict --help");
+    }
+}

@@ -369,6 +369,16 @@ fn read_tensors(file: &Path) -> Result<Vec<PackTensor>, WeightsError> {
     let len = f.metadata().map_err(io)?.len();
     let mut magic = [0u8; 8];
     let got = read_up_to(&mut f, &mut magic).map_err(io)?;
+    let mut first = [0u8; 1];
+    let plausible_safetensors = got == 8 && {
+        // u64 LE header length, then the JSON header. Its low byte may well be 0x80, so a
+        // leading 0x80 alone does not mean pickle.
+        let n = u64::from_le_bytes(magic);
+        n <= 100_000_000
+            && 8 + n <= len
+            && read_up_to(&mut f, &mut first).map_err(io)? == 1
+            && first[0] == b'{'
+    };
     drop(f);
     if got < 8 {
         return Err(fmt(format!(
@@ -376,7 +386,8 @@ fn read_tensors(file: &Path) -> Result<Vec<PackTensor>, WeightsError> {
         )));
     }
     let is_zip = &magic[..2] == b"PK";
-    let is_legacy_pickle = magic[0] == 0x80; // torch.save(_use_new_zipfile_serialization=False)
+    // torch.save(_use_new_zipfile_serialization=False) starts with a pickle (0x80, protocol).
+    let is_legacy_pickle = magic[0] == 0x80 && !plausible_safetensors;
     let tensors: Vec<PackTensor> = if is_zip || is_legacy_pickle {
         let mut store = PytorchStore::from_file(file).map_indices_contiguous(false);
         store

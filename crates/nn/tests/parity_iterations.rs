@@ -8,7 +8,6 @@ mod support;
 
 use support::Fixture;
 
-
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d};
 use burn::nn::PaddingConfig2d;
@@ -32,7 +31,6 @@ use nn::weights::load_submodule;
 const FIXTURE: &str = "monsterpp-tiny";
 const HIDDEN: usize = 32;
 const ITERS: usize = 8;
-
 
 impl Fixture {
     /// Max abs error of `got` against fixture tensor `name` (shapes must agree).

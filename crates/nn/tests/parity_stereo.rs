@@ -7,7 +7,6 @@ mod support;
 
 use support::Fixture;
 
-
 use burn::module::Module;
 use burn::tensor::activation::softmax;
 use burn::tensor::ops::PadMode;
@@ -26,7 +25,6 @@ const DPT_F: usize = 64;
 const HIDDEN: usize = 32;
 /// max_disp / 4 of the tiny fixture.
 const D: usize = 16;
-
 
 impl Fixture {
     fn dpt(&self, side: &str) -> [Tensor<4>; 4] {

@@ -85,12 +85,20 @@ impl Fixture {
     /// `tensors.safetensors` of fixture set `name`, on the flex CPU device.
     pub fn load(name: &str) -> Self {
         let path = fixture_dir(name).join("tensors.safetensors");
-        let tensors = read_all(&path).into_iter().map(|(n, s, v)| (n, (s, v))).collect();
-        Self { tensors, device: Device::flex() }
+        let tensors = read_all(&path)
+            .into_iter()
+            .map(|(n, s, v)| (n, (s, v)))
+            .collect();
+        Self {
+            tensors,
+            device: Device::flex(),
+        }
     }
 
     pub fn raw(&self, name: &str) -> &(Vec<usize>, Vec<f32>) {
-        self.tensors.get(name).unwrap_or_else(|| panic!("fixture has no tensor {name}"))
+        self.tensors
+            .get(name)
+            .unwrap_or_else(|| panic!("fixture has no tensor {name}"))
     }
 
     /// Tensor `name` with its rank checked.
@@ -102,6 +110,9 @@ impl Fixture {
 
     /// `2·img/255 − 1` of `input.left` / `input.right`, as the network normalises its inputs.
     pub fn image(&self, side: &str) -> Tensor<4> {
-        self.t::<4>(&format!("input.{side}")).div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0)
+        self.t::<4>(&format!("input.{side}"))
+            .div_scalar(255.0)
+            .mul_scalar(2.0)
+            .sub_scalar(1.0)
     }
 }

@@ -81,6 +81,23 @@ pub enum Method {
     Predictions(PathBuf),
     /// The split's ground-truth disparity `disparity/<stem>.iio`: measures the chain's own error.
     GroundTruth,
+    /// A stereo network run on each (cropped) rectified pair.
+    Network(Network),
+}
+
+/// A loaded stereo network (MonSter++) and its row name.
+#[derive(Clone)]
+pub struct Network {
+    /// Row name in Table 1, e.g. `MonSter++ (vitl)`.
+    pub name: String,
+    /// The network with its weights and inference options.
+    pub predictor: std::sync::Arc<nn::infer::MonsterPredictor>,
+}
+
+impl std::fmt::Debug for Network {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Network").field("name", &self.name).finish()
+    }
 }
 
 impl Method {
@@ -93,6 +110,7 @@ impl Method {
                 .map(|n| n.to_string_lossy().to_string())
                 .unwrap_or_else(|| "predictions".to_string()),
             Method::GroundTruth => "ground-truth disparity".to_string(),
+            Method::Network(n) => n.name.clone(),
         }
     }
 }
@@ -478,7 +496,7 @@ fn evaluate_pair(
     );
 
     let disparity = match &opts.method {
-        Method::Sgm(params) => {
+        Method::Sgm(_) | Method::Network(_) => {
             let right_img = raster::read_image(&files.right)
                 .with_context(|| format!("reading the right image {}", files.right.display()))?;
             if right_img.size() != full {
@@ -494,8 +512,16 @@ fn evaluate_pair(
             }
             let l = crop(&left_img, x0, y0, cw, ch)?;
             let r = crop(&right_img, x0, y0, cw, ch)?;
-            let range = camera_disparity_range(&rpc_left, &rpc_right, &hl, &hr, (cw, ch))?;
-            crate::predict::predict_sgm(&l, &r, Some(range), params, &Silent)?.0
+            match &opts.method {
+                Method::Sgm(params) => {
+                    let range = camera_disparity_range(&rpc_left, &rpc_right, &hl, &hr, (cw, ch))?;
+                    crate::predict::predict_sgm(&l, &r, Some(range), params, &Silent)?.0
+                }
+                Method::Network(n) => {
+                    crate::predict::predict_monster(&n.predictor, &l, &r, &Silent)?
+                }
+                _ => unreachable!("matched above"),
+            }
         }
         Method::Predictions(dir) => {
             let path = layout::prediction_path(dir, &split.name, stem)?;

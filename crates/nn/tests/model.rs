@@ -1,0 +1,499 @@
+//! The assembled MonSter++ model: end-to-end parity against the upstream tiny fixture
+//! (`../shared/fixtures/monsterpp-tiny`), key sets and parameter counts at the real configs,
+//! load errors on a whole checkpoint, and the save/reload round trip.
+
+mod support;
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::PathBuf;
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+use nn::config::MonsterConfig;
+use nn::monster::{Monster, MonsterOutput};
+use nn::weights::{load_weights, module_keys, save_checkpoint, WeightsError};
+use safetensors::tensor::TensorView;
+use safetensors::{Dtype, SafeTensors};
+
+const FIX: &str = "monsterpp-tiny";
+const ITERS: usize = 8;
+
+fn weights() -> PathBuf {
+    support::fixture_dir(FIX).join("weights.safetensors")
+}
+
+struct Fixture {
+    tensors: HashMap<String, (Vec<usize>, Vec<f32>)>,
+}
+
+impl Fixture {
+    fn load() -> Self {
+        let path = support::fixture_dir(FIX).join("tensors.safetensors");
+        Self {
+            tensors: support::read_all(&path)
+                .into_iter()
+                .map(|(n, s, v)| (n, (s, v)))
+                .collect(),
+        }
+    }
+
+    fn raw(&self, name: &str) -> &(Vec<usize>, Vec<f32>) {
+        self.tensors
+            .get(name)
+            .unwrap_or_else(|| panic!("fixture has no tensor {name}"))
+    }
+
+    fn t<const N: usize>(&self, name: &str, device: &Device) -> Tensor<N> {
+        let (shape, values) = self.raw(name);
+        Tensor::from_data(TensorData::new(values.clone(), shape.clone()), device)
+    }
+
+    /// Max abs error against fixture tensor `name` (shapes must agree); printed.
+    fn check<const N: usize>(&self, got: &Tensor<N>, name: &str, tol: f32) -> f32 {
+        let (shape, want) = self.raw(name);
+        assert_eq!(&got.dims().to_vec(), shape, "{name}: shape");
+        let got: Vec<f32> = got.to_data().convert::<f32>().try_to_vec::<f32>().unwrap();
+        let (err, scale) = support::max_abs_diff(&got, want);
+        println!("{name:<24} max abs err {err:.3e}  (max |ref| {scale:.3e})");
+        assert!(err <= tol, "{name}: max abs error {err:e} > {tol:e}");
+        err
+    }
+}
+
+fn tiny_loaded(device: &Device) -> Monster {
+    let mut model = Monster::new(&MonsterConfig::tiny(), device);
+    let report = load_weights(&mut model, weights()).unwrap_or_else(|e| panic!("{e}"));
+    assert!(report.is_complete(), "{report}");
+    assert!(
+        report.unexpected.is_empty(),
+        "unexpected keys in the fixture: {report}"
+    );
+    println!(
+        "loaded {} tensors ({} num_batches_tracked ignored)",
+        report.applied,
+        report.ignored.len()
+    );
+    model
+}
+
+fn run(model: &Monster, fx: &Fixture, test_mode: bool) -> MonsterOutput {
+    let device = Device::flex();
+    let t0 = std::time::Instant::now();
+    let out = model.forward(
+        fx.t("input.left", &device),
+        fx.t("input.right", &device),
+        ITERS,
+        test_mode,
+    );
+    println!(
+        "forward (test_mode = {test_mode}, 64×128, {ITERS} iters): {:.2?}",
+        t0.elapsed()
+    );
+    out
+}
+
+/// `compute_scale_shift` (sort, strict masks, a mildly ill-conditioned 2×2 solve in f32) amplifies
+/// the ~1e-5 px differences of its inputs end to end: measured 2.2e-4 relative on the scale and
+/// 2e-6 on the shift, i.e. ≤ 5e-5 px on the aligned mono disparity (the parts test, fed with the
+/// fixture's own inputs, gets 2.4e-6). Checked relatively (1e-3) and by its effect in pixels.
+fn check_scale_shift(got: &[(f32, f32)], want: &[f32], mono_max: f32) {
+    assert_eq!(got.len(), 1, "one sample");
+    let (s, t) = got[0];
+    let rs = (s - want[0]).abs() / want[0].abs();
+    let rt = (t - want[1]).abs() / want[1].abs();
+    let px = (s - want[0]).abs() * mono_max + (t - want[1]).abs();
+    println!(
+        "scale_shift ({s}, {t}) vs {want:?}: relative errors {rs:.2e}, {rt:.2e}; \
+         effect on the aligned mono disparity ≤ {px:.2e} px"
+    );
+    assert!(
+        rs <= 1e-3 && rt <= 1e-3 && px <= 1e-3,
+        "scale/shift {got:?} vs {want:?}"
+    );
+}
+
+/// max |depth_mono| of the fixture (bounds the mono disparity at 1/4 resolution).
+fn mono_max(fx: &Fixture) -> f32 {
+    fx.raw("output.depth_mono")
+        .1
+        .iter()
+        .fold(0.0f32, |m, v| m.max(v.abs()))
+}
+
+#[test]
+fn end_to_end_parity_test_mode() {
+    let fx = Fixture::load();
+    let model = tiny_loaded(&Device::flex());
+    assert_eq!(model.config(), &MonsterConfig::tiny());
+    let out = run(&model, &fx, true);
+    let err = fx.check(&out.disp, "output.disp", 1e-3);
+    println!("END-TO-END output.disp max abs error: {err:.3e} px");
+    assert!(out.disp_preds.is_empty());
+    assert!(out.init_disp_up.is_none());
+    fx.check(&out.depth_mono, "output.depth_mono", 1e-4);
+    check_scale_shift(&out.scale_shift, &fx.raw("scale_shift").1, mono_max(&fx));
+}
+
+#[test]
+fn end_to_end_parity_train_mode() {
+    let fx = Fixture::load();
+    let model = tiny_loaded(&Device::flex());
+    let out = run(&model, &fx, false);
+    assert_eq!(out.disp_preds.len(), ITERS + 7);
+    assert_eq!(out.disp_preds.len(), fx.raw("output.disp_preds").0[0]);
+    let preds = Tensor::stack::<5>(out.disp_preds.clone(), 0);
+    fx.check(&preds, "output.disp_preds", 1e-3);
+    // Per prediction, to see where the error grows.
+    let (_, all) = fx.raw("output.disp_preds");
+    let per = all.len() / out.disp_preds.len();
+    for (i, p) in out.disp_preds.iter().enumerate() {
+        let got: Vec<f32> = p.to_data().try_to_vec::<f32>().unwrap();
+        let (e, _) = support::max_abs_diff(&got, &all[i * per..(i + 1) * per]);
+        println!("  disp_preds[{i:2}] max abs err {e:.3e}");
+    }
+    let last = out.disp_preds.last().unwrap().clone();
+    let same: f32 = (last - out.disp.clone()).abs().max().into_scalar();
+    assert_eq!(same, 0.0, "the last prediction is the output");
+    fx.check(&out.disp, "output.disp", 1e-3);
+    let init_up = out
+        .init_disp_up
+        .as_ref()
+        .expect("train mode gives init_disp_up");
+    fx.check(init_up, "output.init_disp_up", 1e-4);
+    fx.check(&out.depth_mono, "output.depth_mono", 1e-4);
+    check_scale_shift(&out.scale_shift, &fx.raw("scale_shift").1, mono_max(&fx));
+}
+
+// ---------------------------------------------------------------- key sets and counts
+
+/// (key → shape) of `state_dict_keys_<name>.txt`, without `num_batches_tracked`.
+fn listed_keys(name: &str) -> BTreeMap<String, Vec<usize>> {
+    let path = support::fixture_dir(FIX).join(format!("state_dict_keys_{name}.txt"));
+    let text = std::fs::read_to_string(&path).unwrap();
+    text.lines()
+        .filter_map(|line| {
+            let mut cols = line.split('\t');
+            let key = cols.next()?.trim();
+            let shape = cols.next()?.trim();
+            if key.ends_with("num_batches_tracked") {
+                return None;
+            }
+            Some((key.to_string(), serde_json::from_str(shape).unwrap()))
+        })
+        .collect()
+}
+
+/// Builds the model at a real config (lazy: nothing is allocated), compares the key sets and
+/// returns (total, trainable) parameters.
+fn check_keys(name: &str) -> (usize, usize) {
+    let cfg = MonsterConfig::preset(name).unwrap();
+    let model = Monster::new(&cfg, &Device::flex());
+    let ours: BTreeMap<String, Vec<usize>> = module_keys(&model).into_iter().collect();
+    let theirs = listed_keys(name);
+    let missing: Vec<_> = theirs.keys().filter(|k| !ours.contains_key(*k)).collect();
+    let extra: Vec<_> = ours.keys().filter(|k| !theirs.contains_key(*k)).collect();
+    let wrong: Vec<_> = theirs
+        .iter()
+        .filter(|(k, s)| ours.get(*k).is_some_and(|o| o != *s))
+        .map(|(k, s)| format!("{k}: ours {:?}, upstream {s:?}", ours[k]))
+        .collect();
+    assert!(
+        missing.is_empty() && extra.is_empty() && wrong.is_empty(),
+        "{name}: missing {missing:?}\nextra {extra:?}\nwrong shapes {wrong:?}"
+    );
+    let (total, trainable) = (model.num_params(), model.num_trainable_params());
+    println!(
+        "{name}: {} keys, {:.2} M parameters, {:.2} M trainable with the mono branch frozen",
+        ours.len(),
+        total as f64 / 1e6,
+        trainable as f64 / 1e6
+    );
+    (total, trainable)
+}
+
+fn assert_millions(got: usize, want_m: f64, what: &str) {
+    let m = got as f64 / 1e6;
+    assert!(
+        (m - want_m).abs() <= 0.005 + 1e-9,
+        "{what}: {m:.4} M, expected {want_m} M"
+    );
+}
+
+#[test]
+fn key_sets_and_param_counts_vits() {
+    let (t, tr) = check_keys("vits");
+    assert_millions(t, 47.79, "vits total");
+    assert_millions(tr, 23.00, "vits trainable");
+}
+
+#[test]
+fn key_sets_and_param_counts_vitb() {
+    let (t, tr) = check_keys("vitb");
+    assert_millions(t, 129.39, "vitb total");
+    assert_millions(tr, 31.92, "vitb trainable");
+}
+
+#[test]
+fn key_sets_and_param_counts_vitl() {
+    let (t, tr) = check_keys("vitl");
+    // Exact values from the upstream listing (PyTorch `parameters()`, buffers excluded).
+    assert_eq!(t, 388_690_818);
+    assert_eq!(tr, 53_375_169);
+    assert_millions(t, 388.69, "vitl total");
+    assert_millions(tr, 53.38, "vitl trainable");
+}
+
+#[test]
+fn param_count_tiny_matches_fixture_meta() {
+    let model = Monster::new(&MonsterConfig::tiny(), &Device::flex());
+    assert_eq!(model.num_params(), 10_310_914); // meta.json `param_count_total`
+    assert_eq!(
+        model.num_params() - model.num_trainable_params(),
+        528_832 + 831_169 // mono_encoder + mono_decoder
+    );
+}
+
+// ---------------------------------------------------------------- load errors
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("nn-model-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// Rewrites the fixture weights through `edit` (which may drop or change tensors).
+fn write_edited(
+    path: &PathBuf,
+    edit: impl Fn(&str, Vec<usize>, Vec<u8>) -> Option<(Vec<usize>, Vec<u8>)>,
+) {
+    let bytes = std::fs::read(weights()).unwrap();
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let mut owned: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    for (name, view) in st.tensors() {
+        if let Some((shape, data)) = edit(&name, view.shape().to_vec(), view.data().to_vec()) {
+            owned.push((name, view.dtype(), shape, data));
+        }
+    }
+    let views: Vec<(String, TensorView)> = owned
+        .iter()
+        .map(|(n, d, s, b)| (n.clone(), TensorView::new(*d, s.clone(), b).unwrap()))
+        .collect();
+    std::fs::write(path, safetensors::serialize(views, None).unwrap()).unwrap();
+}
+
+fn load_err(path: &PathBuf) -> (WeightsError, String) {
+    let mut model = Monster::new(&MonsterConfig::tiny(), &Device::flex());
+    let err = load_weights(&mut model, path).expect_err("the load must fail");
+    let msg = err.to_string();
+    eprintln!("{msg}");
+    (err, msg)
+}
+
+#[test]
+fn missing_keys_are_an_error_naming_them() {
+    let path = tmp("missing.safetensors");
+    let gone = [
+        "update_block_mix_mono.gru08.convq.weight",
+        "REMP.RefinementBlock.conv3b.conv2.bn.running_var",
+        "mono_encoder.pos_embed",
+    ];
+    // (This file's header length happens to end in the byte 0x80, which `weights` once took for
+    // a legacy PyTorch pickle; see `safetensors_header_length_0x80_is_not_pickle`.)
+    write_edited(&path, |n, s, b| (!gone.contains(&n)).then_some((s, b)));
+    let (err, msg) = load_err(&path);
+    assert!(matches!(err, WeightsError::Mismatch { .. }));
+    assert!(msg.contains("missing.safetensors"), "{msg}");
+    for k in gone {
+        assert!(msg.contains(k), "{k} not named in:\n{msg}");
+    }
+    let WeightsError::Mismatch { report } = err else {
+        unreachable!()
+    };
+    assert_eq!(report.missing.len(), 3, "{report}");
+}
+
+#[test]
+fn wrong_shapes_are_an_error_naming_them() {
+    let path = tmp("shape.safetensors");
+    write_edited(&path, |n, s, b| match n {
+        // Halved output channels.
+        "classifier.weight" => Some((
+            vec![s[0], s[1] / 2, s[2], s[3], s[4]],
+            b[..b.len() / 2].to_vec(),
+        )),
+        // Same element count, different layout ([1, 32, 3, 3] → [32, 1, 3, 3]).
+        "REMP.final_conv.weight" => Some((vec![s[1], s[0], s[2], s[3]], b)),
+        "context_zqr_convs.1.bias" => Some((vec![s[0] / 3], b[..b.len() / 3].to_vec())),
+        _ => Some((s, b)),
+    });
+    let (err, msg) = load_err(&path);
+    let WeightsError::Mismatch { report } = err else {
+        panic!("expected a mismatch error, got {msg}")
+    };
+    assert!(msg.contains("shape.safetensors"), "{msg}");
+    for k in [
+        "classifier.weight",
+        "context_zqr_convs.1.bias",
+        "REMP.final_conv.weight",
+    ] {
+        assert!(
+            report.mismatched.iter().any(|m| m.contains(k)),
+            "{k} not reported:\n{msg}"
+        );
+    }
+    assert!(msg.contains("shape"), "{msg}");
+    assert_eq!(report.mismatched.len(), 3, "{report}");
+}
+
+#[test]
+fn truncated_or_foreign_file_is_an_error_naming_it() {
+    let bytes = std::fs::read(weights()).unwrap();
+    let path = tmp("truncated.safetensors");
+    std::fs::write(&path, &bytes[..bytes.len() - 1000]).unwrap();
+    let (err, msg) = load_err(&path);
+    assert!(matches!(err, WeightsError::Format { .. }), "{msg}");
+    assert!(
+        msg.contains("truncated.safetensors") && msg.contains("truncated"),
+        "{msg}"
+    );
+
+    let path = tmp("header-only.safetensors");
+    std::fs::write(&path, &bytes[..100]).unwrap();
+    let (_, msg) = load_err(&path);
+    assert!(msg.contains("header-only.safetensors"), "{msg}");
+
+    let (err, msg) = load_err(&tmp("does-not-exist.pth"));
+    assert!(matches!(err, WeightsError::Io { .. }), "{msg}");
+    assert!(msg.contains("does-not-exist.pth"), "{msg}");
+}
+
+/// A safetensors file whose u64 header length has 0x80 as its first (low) byte is still read as
+/// safetensors, not as a legacy PyTorch pickle (which also starts with 0x80).
+#[test]
+fn safetensors_header_length_0x80_is_not_pickle() {
+    let data = vec![0u8; 8];
+    let path = tmp("header-0x80.safetensors");
+    let bytes = (0..512)
+        .map(|k| {
+            let view = TensorView::new(Dtype::F32, vec![2], &data).unwrap();
+            let meta = HashMap::from([("pad".to_string(), "x".repeat(k))]);
+            safetensors::serialize([("w", view)], Some(meta)).unwrap()
+        })
+        .find(|b| b[0] == 0x80)
+        .expect("some padding gives a header length ending in 0x80");
+    std::fs::write(&path, bytes).unwrap();
+    let keys = nn::weights::file_keys(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(keys, vec![("w".to_string(), vec![2])]);
+}
+
+/// A checkpoint of another layout (here: an encoder with 6 instead of 12 blocks) names the keys
+/// it lacks instead of failing somewhere in the forward pass.
+#[test]
+fn wrong_config_is_an_error() {
+    let path = tmp("other-config.safetensors");
+    write_edited(&path, |n, s, b| {
+        let deep = n
+            .strip_prefix("mono_encoder.blocks.")
+            .and_then(|r| r.split('.').next())
+            .and_then(|i| i.parse::<usize>().ok())
+            .is_some_and(|i| i >= 6);
+        (!deep).then_some((s, b))
+    });
+    let (_, msg) = load_err(&path);
+    assert!(
+        msg.contains("mono_encoder.blocks.11.attn.qkv.weight"),
+        "{msg}"
+    );
+}
+
+// ---------------------------------------------------------------- save / reload
+
+#[test]
+fn save_and_reload_gives_identical_output() {
+    let fx = Fixture::load();
+    let device = Device::flex();
+    let model = tiny_loaded(&device);
+    let path = tmp("roundtrip.safetensors");
+    save_checkpoint(&model, &path).unwrap();
+    let mut back = Monster::new(&MonsterConfig::tiny(), &device);
+    let report = load_weights(&mut back, &path).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        report.is_complete() && report.unexpected.is_empty(),
+        "{report}"
+    );
+    // The saved file has exactly the upstream key set (minus num_batches_tracked).
+    let saved: Vec<String> = nn::weights::file_keys(&path)
+        .unwrap()
+        .into_iter()
+        .map(|(k, _)| k)
+        .collect();
+    let want: Vec<String> = nn::weights::file_keys(weights())
+        .unwrap()
+        .into_iter()
+        .map(|(k, _)| k)
+        .filter(|k| !k.ends_with("num_batches_tracked"))
+        .collect();
+    assert_eq!(saved, want);
+
+    let a = run(&model, &fx, true).disp;
+    let b = run(&back, &fx, true).disp;
+    let diff: f32 = (a.clone() - b).abs().max().into_scalar();
+    println!("save/reload: max abs output difference {diff:e}");
+    assert_eq!(diff, 0.0);
+    fx.check(&a, "output.disp", 1e-3);
+}
+
+// ---------------------------------------------------------------- training setup
+
+struct GradCounter {
+    path: Vec<String>,
+    trainable: usize,
+    frozen: usize,
+    frozen_outside_mono: Vec<String>,
+}
+
+impl ModuleVisitor for GradCounter {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+    }
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let key = self.path.join(".");
+        if key.ends_with("running_mean") || key.ends_with("running_var") {
+            return;
+        }
+        let n = param.lazy_shape().num_elements();
+        if param.val().is_require_grad() {
+            self.trainable += n;
+        } else {
+            self.frozen += n;
+            if !key.starts_with("mono_") {
+                self.frozen_outside_mono.push(key);
+            }
+        }
+    }
+}
+
+/// `freeze_for_training` on the autodiff device: exactly the mono branch stops requiring
+/// gradients (matching `num_trainable_params`).
+#[test]
+fn freeze_for_training_freezes_exactly_the_mono_branch() {
+    let device = Device::flex().autodiff();
+    let model = Monster::new(&MonsterConfig::tiny(), &device).freeze_for_training();
+    let mut v = GradCounter {
+        path: Vec::new(),
+        trainable: 0,
+        frozen: 0,
+        frozen_outside_mono: Vec::new(),
+    };
+    model.visit(&mut v);
+    assert!(
+        v.frozen_outside_mono.is_empty(),
+        "{:?}",
+        v.frozen_outside_mono
+    );
+    assert_eq!(v.trainable, model.num_trainable_params());
+    assert_eq!(v.trainable + v.frozen, model.num_params());
+}
