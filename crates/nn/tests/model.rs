@@ -497,3 +497,48 @@ fn freeze_for_training_freezes_exactly_the_mono_branch() {
     assert_eq!(v.trainable, model.num_trainable_params());
     assert_eq!(v.trainable + v.frozen, model.num_params());
 }
+
+#[test]
+fn depth_anything_checkpoint_loads_into_the_mono_branch_and_the_dpt_copy() {
+    // A Depth Anything V2 checkpoint made from the fixture's mono branch: `pretrained.*` and
+    // `depth_head.*` keys, nothing else.
+    let path = tmp("depth_anything.safetensors");
+    let bytes = std::fs::read(weights()).unwrap();
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let renamed: Vec<(String, TensorView)> = st
+        .tensors()
+        .into_iter()
+        .filter_map(|(name, view)| {
+            let key = name
+                .strip_prefix("mono_encoder.")
+                .map(|k| format!("pretrained.{k}"))
+                .or_else(|| {
+                    name.strip_prefix("mono_decoder.")
+                        .map(|k| format!("depth_head.{k}"))
+                })?;
+            Some((key, view))
+        })
+        .collect();
+    std::fs::write(&path, safetensors::serialize(renamed, None).unwrap()).unwrap();
+
+    let mut model = Monster::new(&MonsterConfig::tiny(), &Device::flex());
+    let [encoder, head, copy] = model.load_depth_anything(&path).unwrap();
+    assert!(encoder.is_complete() && head.is_complete() && copy.is_complete());
+    assert!(
+        !copy.unexpected.is_empty(),
+        "the DPT copy leaves the output convolutions unused"
+    );
+    // The encoder holds the fixture's ViT weights, the DPT copy the depth head's.
+    let fixture = support::read_all(&weights());
+    let value = |key: &str| fixture.iter().find(|(n, _, _)| n == key).unwrap().2.clone();
+    let got = |t: Tensor<4>| t.into_data().try_into_vec::<f32>().unwrap();
+    assert_eq!(
+        got(model.mono_encoder.patch_embed.proj.weight.val()),
+        value("mono_encoder.patch_embed.proj.weight")
+    );
+    assert_eq!(
+        got(model.feat_decoder.scratch.layer1_rn.weight.val()),
+        value("mono_decoder.scratch.layer1_rn.weight")
+    );
+    let _ = std::fs::remove_file(&path);
+}

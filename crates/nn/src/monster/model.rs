@@ -57,7 +57,7 @@ use super::update::{
 use super::upsample::{context_upsample, freeze_bn, spx_gru_init, Conv2x};
 use super::vit::{normalize_image, DinoVisionTransformer};
 use crate::config::MonsterConfig;
-use crate::weights::module_keys;
+use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
 
 /// Channels of the stereo matching features (`features[0] = cat(f4 48, stem_4 48)`).
 const FEATURE0_CHANNELS: usize = 96;
@@ -346,6 +346,23 @@ impl Monster {
     /// (`mono_encoder`, `mono_decoder`).
     pub fn num_trainable_params(&self) -> usize {
         count_params(self, |k| !MONO_PREFIXES.iter().any(|p| k.starts_with(p)))
+    }
+
+    /// Loads an official Depth Anything V2 checkpoint (keys `pretrained.*` for the DINOv2 encoder,
+    /// `depth_head.*` for the DPT head, e.g. `depth_anything_v2_vitl.pth`) as upstream does at
+    /// construction: strictly into `mono_encoder` and `mono_decoder`, and into the trainable copy
+    /// `feat_decoder` (which has no output convolutions: those keys are left unused). The reports
+    /// are returned in that order; a missing or mis-shaped key is an error naming it.
+    pub fn load_depth_anything(
+        &mut self,
+        path: impl AsRef<std::path::Path>,
+    ) -> Result<[LoadReport; 3], WeightsError> {
+        let path = path.as_ref();
+        Ok([
+            load_submodule(&mut self.mono_encoder, path, "pretrained.")?,
+            load_submodule(&mut self.mono_decoder, path, "depth_head.")?,
+            load_submodule(&mut self.feat_decoder, path, "depth_head.")?,
+        ])
     }
 
     /// Prepares the model for training as upstream (`requires_grad_(False)` on the mono branch,
