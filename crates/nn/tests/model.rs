@@ -261,26 +261,6 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// Rewrites the fixture weights through `edit` (which may drop or change tensors).
-fn write_edited(
-    path: &PathBuf,
-    edit: impl Fn(&str, Vec<usize>, Vec<u8>) -> Option<(Vec<usize>, Vec<u8>)>,
-) {
-    let bytes = std::fs::read(weights()).unwrap();
-    let st = SafeTensors::deserialize(&bytes).unwrap();
-    let mut owned: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
-    for (name, view) in st.tensors() {
-        if let Some((shape, data)) = edit(&name, view.shape().to_vec(), view.data().to_vec()) {
-            owned.push((name, view.dtype(), shape, data));
-        }
-    }
-    let views: Vec<(String, TensorView)> = owned
-        .iter()
-        .map(|(n, d, s, b)| (n.clone(), TensorView::new(*d, s.clone(), b).unwrap()))
-        .collect();
-    std::fs::write(path, safetensors::serialize(views, None).unwrap()).unwrap();
-}
-
 fn load_err(path: &PathBuf) -> (WeightsError, String) {
     let mut model = Monster::new(&MonsterConfig::tiny(), &Device::flex());
     let err = load_weights(&mut model, path).expect_err("the load must fail");
@@ -299,7 +279,7 @@ fn missing_keys_are_an_error_naming_them() {
     ];
     // (This file's header length happens to end in the byte 0x80, which `weights` once took for
     // a legacy PyTorch pickle; see `safetensors_header_length_0x80_is_not_pickle`.)
-    write_edited(&path, |n, s, b| (!gone.contains(&n)).then_some((s, b)));
+    support::write_edited_weights(FIX, &path, |n, s, b| (!gone.contains(&n)).then_some((s, b)));
     let (err, msg) = load_err(&path);
     assert!(matches!(err, WeightsError::Mismatch { .. }));
     assert!(msg.contains("missing.safetensors"), "{msg}");
@@ -315,7 +295,7 @@ fn missing_keys_are_an_error_naming_them() {
 #[test]
 fn wrong_shapes_are_an_error_naming_them() {
     let path = tmp("shape.safetensors");
-    write_edited(&path, |n, s, b| match n {
+    support::write_edited_weights(FIX, &path, |n, s, b| match n {
         // Halved output channels.
         "classifier.weight" => Some((
             vec![s[0], s[1] / 2, s[2], s[3], s[4]],
@@ -391,7 +371,7 @@ fn safetensors_header_length_0x80_is_not_pickle() {
 #[test]
 fn wrong_config_is_an_error() {
     let path = tmp("other-config.safetensors");
-    write_edited(&path, |n, s, b| {
+    support::write_edited_weights(FIX, &path, |n, s, b| {
         let deep = n
             .strip_prefix("mono_encoder.blocks.")
             .and_then(|r| r.split('.').next())

@@ -15,7 +15,7 @@ use nn::weights::{
     file_keys, load_submodule, load_weights, module_keys, save_checkpoint, WeightsError,
 };
 use safetensors::tensor::TensorView;
-use safetensors::{Dtype, SafeTensors};
+use safetensors::SafeTensors;
 
 const FIX: &str = "monsterpp-tiny";
 const PARTS: [&str; 3] = ["mono_encoder.", "mono_decoder.", "feat_decoder."];
@@ -158,26 +158,6 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// Rewrites the fixture weights through `edit` (which may drop or change tensors).
-fn write_edited(
-    path: &PathBuf,
-    edit: impl Fn(&str, Vec<usize>, Vec<u8>) -> Option<(Vec<usize>, Vec<u8>)>,
-) {
-    let bytes = std::fs::read(support::fixture_dir(FIX).join("weights.safetensors")).unwrap();
-    let st = SafeTensors::deserialize(&bytes).unwrap();
-    let mut owned: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
-    for (name, view) in st.tensors() {
-        if let Some((shape, data)) = edit(&name, view.shape().to_vec(), view.data().to_vec()) {
-            owned.push((name, view.dtype(), shape, data));
-        }
-    }
-    let views: Vec<(String, TensorView)> = owned
-        .iter()
-        .map(|(n, d, s, b)| (n.clone(), TensorView::new(*d, s.clone(), b).unwrap()))
-        .collect();
-    std::fs::write(path, safetensors::serialize(views, None).unwrap()).unwrap();
-}
-
 fn tiny_encoder() -> DinoVisionTransformer {
     DinoVisionTransformer::new(&MonsterConfig::tiny().vit, &Device::default())
 }
@@ -185,7 +165,7 @@ fn tiny_encoder() -> DinoVisionTransformer {
 #[test]
 fn missing_key_is_an_error_naming_it() {
     let path = tmp("missing.safetensors");
-    write_edited(&path, |n, s, b| {
+    support::write_edited_weights(FIX, &path, |n, s, b| {
         (n != "mono_encoder.blocks.3.attn.qkv.weight" && n != "mono_encoder.norm.weight")
             .then_some((s, b))
     });
@@ -204,7 +184,7 @@ fn missing_key_is_an_error_naming_it() {
 #[test]
 fn wrong_shape_is_an_error_naming_it() {
     let path = tmp("shape.safetensors");
-    write_edited(&path, |n, s, b| {
+    support::write_edited_weights(FIX, &path, |n, s, b| {
         if n == "mono_encoder.blocks.0.mlp.fc1.bias" {
             let half = b.len() / 2;
             Some((vec![s[0] / 2], b[..half].to_vec()))

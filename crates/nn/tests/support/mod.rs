@@ -116,3 +116,30 @@ impl Fixture {
             .sub_scalar(1.0)
     }
 }
+
+/// Rewrites the `weights.safetensors` of fixture set `fixture` into `path` through `edit`, which
+/// may drop a tensor (None) or change its shape and bytes: for load-error tests.
+pub fn write_edited_weights(
+    fixture: &str,
+    path: &std::path::Path,
+    edit: impl Fn(&str, Vec<usize>, Vec<u8>) -> Option<(Vec<usize>, Vec<u8>)>,
+) {
+    let bytes = std::fs::read(fixture_dir(fixture).join("weights.safetensors")).unwrap();
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let mut owned: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    for (name, view) in st.tensors() {
+        if let Some((shape, data)) = edit(&name, view.shape().to_vec(), view.data().to_vec()) {
+            owned.push((name, view.dtype(), shape, data));
+        }
+    }
+    let views: Vec<(String, safetensors::tensor::TensorView)> = owned
+        .iter()
+        .map(|(n, d, s, b)| {
+            (
+                n.clone(),
+                safetensors::tensor::TensorView::new(*d, s.clone(), b).unwrap(),
+            )
+        })
+        .collect();
+    std::fs::write(path, safetensors::serialize(views, None).unwrap()).unwrap();
+}
