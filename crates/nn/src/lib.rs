@@ -34,6 +34,8 @@
 //! helper. [`monster::Monster::num_trainable_params`] counts what remains trainable.
 
 pub mod config;
+pub mod dinov3;
 pub mod infer;
 pub mod monster;
+pub mod segformer;
 pub mod weights;

@@ -4,14 +4,20 @@
 //!
 //! Every stage reports progress through [`Progress`] so the CLI can draw bars while tests stay quiet.
 
+pub mod curate;
+pub mod dataset_build;
 pub mod demo;
 pub mod dsm;
 pub mod eval;
+pub mod masks;
 pub mod metrics;
 pub mod predict;
 pub mod progress;
 pub mod rectify;
 pub mod report;
+pub mod synthesize;
+pub mod teacher;
 pub mod world_io;
+pub mod world_training;
 
 pub use progress::{Progress, Silent};

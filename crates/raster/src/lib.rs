@@ -10,6 +10,8 @@ mod image;
 pub mod colormap;
 pub mod formats;
 pub mod geometry;
+pub mod morphology;
+pub mod resize;
 pub mod ssim;
 
 pub use error::RasterError;

@@ -1,0 +1,1 @@
+//! Training sets on disk (see the crate description).

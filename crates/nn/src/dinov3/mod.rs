@@ -1,0 +1,1 @@
+//! DINOv3 ViT image features and the curation similarity score.

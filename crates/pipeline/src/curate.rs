@@ -1,0 +1,1 @@
+//! `curate`: consistency scores of candidate synchronic pairs and the selected top-K intersection.

@@ -1,0 +1,1 @@
+//! `dataset build`: the 25 left/right combinations per selected pair in the training layout.

@@ -1,0 +1,1 @@
+//! `masks`: water, tree and building masks from one segmentation pass per image.

@@ -1,0 +1,1 @@
+//! `synthesize`: seasonal variants of the selected images, checked for geometry and rectified.

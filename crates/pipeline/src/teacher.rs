@@ -1,0 +1,1 @@
+//! `teacher`: zero-shot disparities of the frozen teacher for every real pair.

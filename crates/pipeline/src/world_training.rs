@@ -1,0 +1,1 @@
+//! A small training set from the procedural world, in the training layout.

@@ -1,0 +1,1 @@
+//! Binary morphology on masks: connected components, small-component removal, hole filling, dilation.

@@ -1,0 +1,1 @@
+//! Seasonal variants that keep the geometry (see the crate description).

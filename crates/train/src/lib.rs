@@ -1,0 +1,1 @@
+//! Fine-tuning MonSter++ with the SeasonStereo loss (see the crate description).
