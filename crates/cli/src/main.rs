@@ -3,7 +3,10 @@
 //! This binary only parses arguments and draws progress; the work lives in the library crates.
 
 mod bars;
+mod dataset;
 mod dsm;
+mod stages;
+mod train;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -51,6 +54,25 @@ enum Command {
     /// and water masked); prints the paper's Table 1. Resumable: pairs already in OUT/pairs.csv
     /// are skipped.
     Eval(EvalArgs),
+    /// Teacher disparities (SGM, or MonSter++ with weights) for every real synchronic pair;
+    /// resumable and shardable.
+    Teacher(stages::TeacherArgs),
+    /// Score the consistency of synchronic pairs (colour, SSIM, image features) and select the
+    /// intersection of the two top-K rankings; resumable and shardable.
+    Curate(stages::CurateArgs),
+    /// Water, tree and building masks from one segmentation per image (SegFormer with weights,
+    /// or the offline classifier); resumable and shardable.
+    Masks(stages::MasksArgs),
+    /// Four seasonal variants of every image of the selected pairs (centre crop, built-in model
+    /// or a generative API), checked for geometric fidelity and rectified; resumable, shardable.
+    Synthesize(dataset::SynthesizeArgs),
+    /// Training sets: `dataset build` assembles the 25 season combinations per pair, masks,
+    /// subsets S1/S2/S3 and manifest; `dataset world` makes one from procedural worlds.
+    Dataset(dataset::DatasetArgs),
+    /// Fine-tune MonSter++ with the SeasonStereo loss from a TOML configuration or a preset
+    /// (tiny, a-lidar, b-disp, c-photo, d-full, s1, s2, s3); checkpoints, exact --resume, Ctrl-C
+    /// saves and exits.
+    Train(train::TrainArgs),
 }
 
 #[derive(Args)]
@@ -495,6 +517,12 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::Dsm(a) => dsm::run(a)?,
+        Command::Teacher(a) => stages::run_teacher(a, &progress)?,
+        Command::Curate(a) => stages::run_curate(a, &progress)?,
+        Command::Masks(a) => stages::run_masks(a, &progress)?,
+        Command::Synthesize(a) => dataset::run_synthesize_command(a, &progress)?,
+        Command::Dataset(a) => dataset::run_dataset(a, &progress)?,
+        Command::Train(a) => train::run(a)?,
         Command::Demo(a) => {
             let opts = DemoOptions {
                 size: a.size,

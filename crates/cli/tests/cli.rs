@@ -439,3 +439,386 @@ fn predict_monsterpp_errors_name_the_file_and_the_keys() {
         assert!(help.contains(flag), "{flag} missing from predict --help");
     }
 }
+
+/// Data rows of an experiment list, and how many are flagged diachronic.
+fn experiment_rows(path: &Path) -> (usize, usize) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("filename,diachronic"),
+        "{}",
+        path.display()
+    );
+    let rows: Vec<&str> = lines.filter(|l| !l.is_empty()).collect();
+    let diachronic = rows.iter().filter(|l| l.ends_with(",True")).count();
+    (rows.len(), diachronic)
+}
+
+#[test]
+fn dataset_world_writes_25_combinations_per_pair_and_the_subsets() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("set");
+    let args = [
+        "dataset",
+        "world",
+        "--size",
+        "96",
+        "--worlds",
+        "2",
+        "--val-worlds",
+        "1",
+        "--seed",
+        "5",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(stdout.contains("S3"), "{stdout}");
+
+    // 25 combinations per pair on both views: 5 tags (real + 4 seasons) on each side.
+    let tags = ["", "__summer", "__autumn", "__winter", "__spring"];
+    for seed in [5, 6] {
+        let (a, b) = (format!("W{seed:06}_A"), format!("W{seed:06}_B"));
+        for tl in tags {
+            for tr in tags {
+                for side in ["L", "R"] {
+                    let f = out
+                        .join("train")
+                        .join(side)
+                        .join(format!("{a}{tl}-{b}{tr}.npy"));
+                    assert!(f.is_file(), "{}", f.display());
+                }
+            }
+        }
+        let pair = format!("{a}-{b}");
+        assert!(out
+            .join("disparity_maps/sgm")
+            .join(format!("{pair}.iio"))
+            .is_file());
+        assert!(out
+            .join("disparity_maps/GT")
+            .join(format!("{pair}.iio"))
+            .is_file());
+        for m in ["masks", "water_masks", "tree_masks", "building_masks"] {
+            assert!(
+                out.join("train")
+                    .join(m)
+                    .join("L")
+                    .join(format!("{pair}.npy"))
+                    .is_file(),
+                "{m}"
+            );
+        }
+    }
+    assert_eq!(std::fs::read_dir(out.join("train/L")).unwrap().count(), 50);
+
+    // The three subsets (and the full list): S1 real only, S2 + 4 synchronic synthetic per pair,
+    // S3 the same budget half synchronic half diachronic.
+    let exp = out.join("experiments");
+    assert_eq!(experiment_rows(&exp.join("sub1_synchronic.csv")), (2, 0));
+    assert_eq!(experiment_rows(&exp.join("sub2_synchronic.csv")), (10, 0));
+    assert_eq!(experiment_rows(&exp.join("sub5_syndiach.csv")), (10, 4));
+    assert_eq!(experiment_rows(&exp.join("sub3_diachronic.csv")), (50, 40));
+    assert_eq!(experiment_rows(&exp.join("sub_val.csv")), (25, 20));
+    let manifest = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+    for key in ["sub5_syndiach", "\"teacher\": \"sgm\"", "builtin"] {
+        assert!(manifest.contains(key), "{key} not in {manifest}");
+    }
+
+    // A rerun finds everything done.
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(stdout.contains("0 built now, 2 already built"), "{stdout}");
+
+    // Bad shards are refused with the expected form.
+    let o = seasonstereo(&[
+        "dataset",
+        "build",
+        "--pairs",
+        out.join("sources/train/pairs").to_str().unwrap(),
+        "--teacher",
+        out.join("sources/train/teacher").to_str().unwrap(),
+        "--shard",
+        "2/2",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("0 ≤ i < n"), "{}", stderr(&o));
+}
+
+#[test]
+fn dataset_help_documents_layout_subsets_and_shards() {
+    let o = seasonstereo(&["dataset", "build", "--help"]);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    for key in [
+        "sub1_synchronic",
+        "sub5_syndiach",
+        "--shard",
+        "water_masks",
+        "Resumable",
+    ] {
+        assert!(
+            text.contains(key),
+            "{key} not in `dataset build --help`:\n{text}"
+        );
+    }
+    let o = seasonstereo(&["synthesize", "--help"]);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    for key in [
+        "--generator",
+        "cropped-synthetic",
+        "--crop",
+        "--shard",
+        "rejected.csv",
+    ] {
+        assert!(
+            text.contains(key),
+            "{key} not in `synthesize --help`:\n{text}"
+        );
+    }
+}
+
+/// `train --config tiny` on a procedural-world set: runs, stops with a checkpoint, resumes to
+/// the end, writes the logs; bad input is named.
+#[test]
+fn train_tiny_stops_resumes_and_logs() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("set");
+    let o = seasonstereo(&[
+        "dataset",
+        "world",
+        "-o",
+        data.to_str().unwrap(),
+        "--size",
+        "128",
+        "--worlds",
+        "1",
+        "--val-worlds",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = dir.path().join("run");
+    let small = [
+        "--set",
+        "run.batch_size=1",
+        "--set",
+        "run.train_iters=7",
+        "--set",
+        "run.valid_iters=7",
+        "--set",
+        "augment.crop_height=32",
+        "--set",
+        "augment.crop_width=64",
+        "--set",
+        "model.max_disp=32",
+        "--set",
+        "loss.max_disp=32.0",
+        "--set",
+        "loss.ignore_border=2",
+        "--set",
+        "run.valid_crop=64",
+        "--set",
+        "data.valid_limit=1",
+        "--set",
+        "run.validate_every=3",
+    ];
+    let mut args = vec![
+        "train",
+        "--config",
+        "tiny",
+        "--data",
+        data.to_str().unwrap(),
+        "-o",
+        run.to_str().unwrap(),
+        "--steps",
+        "3",
+        "--stop-after",
+        "2",
+    ];
+    args.extend(small);
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(out.contains("stopped after 2 of 3 steps"), "{out}");
+    assert!(run.join("checkpoints/step-0000002/state.json").is_file());
+
+    let o = seasonstereo(&["train", "--resume", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(out.contains("done: 3 of 3 steps"), "{out}");
+    assert!(out.contains("validation EPE"), "{out}");
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+    assert_eq!(metrics.lines().count(), 4, "{metrics}");
+    assert!(metrics.starts_with("step,lr,total,disp,photo,smooth"));
+    assert!(run.join("final.safetensors").is_file() && run.join("config.toml").is_file());
+
+    // Errors name the problem.
+    let o = seasonstereo(&["train", "--config", "tiny", "--set", "run.stepz=3"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("stepz"),
+        "{}",
+        stderr(&o)
+    );
+    let o = seasonstereo(&[
+        "train",
+        "--config",
+        "tiny",
+        "--data",
+        dir.path().join("none").to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("none"),
+        "{}",
+        stderr(&o)
+    );
+    let o = seasonstereo(&["train"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--config"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+/// `teacher` → `curate` → `masks` on two procedural worlds, sharded and resumed as an array job
+/// would run them.
+#[test]
+fn data_stages_teacher_curate_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    let pairs = dir.path().join("pairs");
+    for seed in [3, 4, 5] {
+        let o = seasonstereo(&[
+            "world",
+            "-o",
+            pairs.to_str().unwrap(),
+            "--size",
+            "80",
+            "--seed",
+            &seed.to_string(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let teacher = dir.path().join("teacher");
+    let t = teacher.to_str().unwrap();
+    let p = pairs.to_str().unwrap();
+    for shard in ["0/2", "1/2"] {
+        let o = seasonstereo(&[
+            "teacher", "--pairs", p, "-o", t, "--range", "0:40", "--shard", shard,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let o = seasonstereo(&["teacher", "--pairs", p, "-o", t, "--range", "0:40"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("0 processed, 3 already done"), "{out}");
+    assert!(
+        teacher.join("WORLD_4_A-WORLD_4_B.iio").is_file() && teacher.join("teacher.json").is_file()
+    );
+
+    let cur = dir.path().join("curate");
+    let o = seasonstereo(&[
+        "curate",
+        "--pairs",
+        p,
+        "--teacher",
+        t,
+        "-o",
+        cur.to_str().unwrap(),
+        "--keep",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("offline histogram descriptor") && out.contains("K = 2"),
+        "{out}"
+    );
+    let csv = std::fs::read_to_string(cur.join("scores.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 4, "{csv}");
+    let selected = std::fs::read_to_string(cur.join("selected.txt")).unwrap();
+    assert!((1..=2).contains(&selected.lines().count()), "{selected}");
+    assert!(cur.join("report.html").is_file() && cur.join("curate.json").is_file());
+
+    let seg = dir.path().join("seg");
+    let o = seasonstereo(&[
+        "masks",
+        "--images",
+        &format!("{p}/L"),
+        "-o",
+        seg.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("offline pixel classifier"));
+    for class in ["water", "tree", "building"] {
+        let m = seg.join(format!(
+            "{class}_segmentation/masks/WORLD_3_A-WORLD_3_B_mask.png"
+        ));
+        assert!(m.is_file(), "{}", m.display());
+        let txt = std::fs::read_to_string(
+            seg.join(format!("{class}_segmentation/{class}_percentages.txt")),
+        )
+        .unwrap();
+        assert_eq!(txt.lines().count(), 4, "{txt}");
+    }
+
+    // Errors name the problem and the fix.
+    let o = seasonstereo(&[
+        "curate",
+        "--pairs",
+        p,
+        "--teacher",
+        dir.path().join("none").to_str().unwrap(),
+        "-o",
+        cur.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("seasonstereo teacher"),
+        "{}",
+        stderr(&o)
+    );
+    let o = seasonstereo(&["teacher", "--pairs", p, "-o", t, "--shard", "2/2"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("0 ≤ i < n"),
+        "{}",
+        stderr(&o)
+    );
+    let o = seasonstereo(&[
+        "curate",
+        "--pairs",
+        p,
+        "--teacher",
+        t,
+        "-o",
+        cur.to_str().unwrap(),
+        "--keep",
+        "0",
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("at least 1"),
+        "{}",
+        stderr(&o)
+    );
+    let o = seasonstereo(&[
+        "masks",
+        "--images",
+        p,
+        "-o",
+        seg.to_str().unwrap(),
+        "--segformer",
+        dir.path().join("no.pt").to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("no.pt"),
+        "{}",
+        stderr(&o)
+    );
+    for cmd in ["teacher", "curate", "masks"] {
+        let o = seasonstereo(&[cmd, "--help"]);
+        let help = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success() && help.contains("--shard") && help.contains("Example"),
+            "{help}"
+        );
+    }
+}

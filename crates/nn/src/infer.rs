@@ -160,13 +160,20 @@ pub fn device_by_name(name: &str) -> Result<Device, String> {
         #[cfg(feature = "cuda")]
         "cuda" => Ok(Device::cuda(0)),
         "auto" => Ok(default_device()),
-        "wgpu" | "cuda" => Err(format!(
-            "the {name} backend is not compiled in: rebuild with `--features {name}`"
-        )),
+        #[cfg(not(feature = "wgpu"))]
+        "wgpu" => Err(not_compiled_in("wgpu")),
+        #[cfg(not(feature = "cuda"))]
+        "cuda" => Err(not_compiled_in("cuda")),
         other => Err(format!(
             "unknown device {other:?} (expected auto, cpu, wgpu or cuda)"
         )),
     }
+}
+
+/// Why a GPU backend named on the command line cannot be used, and how to get it.
+#[allow(dead_code)] // unused when both GPU features are compiled in
+fn not_compiled_in(backend: &str) -> String {
+    format!("the {backend} backend is not compiled in: rebuild with `--features {backend}`")
 }
 
 /// The best compiled device: CUDA, then wgpu, then the CPU.

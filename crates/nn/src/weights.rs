@@ -8,6 +8,8 @@
 //! pub fn load_submodule<M: Module>(module: &mut M, path: impl AsRef<Path>, prefix: &str) -> Result<LoadReport, WeightsError>
 //! pub fn load_submodule_with<M: Module>(module: &mut M, path: impl AsRef<Path>, prefix: &str,
 //!                                       remap: &[(&str, &str)]) -> Result<LoadReport, WeightsError>
+//! pub fn load_weights_mapped<M: Module>(module: &mut M, path: impl AsRef<Path>,
+//!                                       map_keys: impl FnOnce(&[String]) -> Vec<Option<String>>) -> Result<LoadReport, WeightsError>
 //! pub fn save_checkpoint<M: Module>(module: &M, path: impl AsRef<Path>) -> Result<(), WeightsError>
 //! pub fn module_keys<M: Module>(module: &M) -> Vec<(String, Vec<usize>)>   // PyTorch names, lazy shapes
 //! pub fn file_keys(path: impl AsRef<Path>) -> Result<Vec<(String, Vec<usize>)>, WeightsError>
@@ -205,7 +207,57 @@ pub fn load_submodule_with<M: Module>(
     }
     let (mut kept, _) = remapper.remap(inside);
     kept.extend(outside);
+    apply_with_report(module, file, prefix, kept, ignored)
+}
 
+/// Loads a whole model after renaming the file's keys with `map_keys`, which receives every key
+/// of the file (after the `model`/`state_dict` unwrapping and `module.` stripping of [`load_weights`])
+/// and returns the model key for each, or `None` for a tensor that does not belong to the model
+/// (dropped silently, e.g. optimizer state beside a wrapped state dict). For checkpoints whose
+/// naming needs more than regex renames (the SegFormer `.pt` of the release: `model_state_dict`
+/// wrapper, `module.`/`model.` substrings deleted). `num_batches_tracked` keys are ignored.
+pub fn load_weights_mapped<M: Module>(
+    module: &mut M,
+    path: impl AsRef<Path>,
+    map_keys: impl FnOnce(&[String]) -> Vec<Option<String>>,
+) -> Result<LoadReport, WeightsError> {
+    let file = path.as_ref().to_path_buf();
+    let tensors = read_tensors(&file)?;
+    let names: Vec<String> = tensors.iter().map(|t| t.name.clone()).collect();
+    let mapped = map_keys(&names);
+    if mapped.len() != names.len() {
+        return Err(WeightsError::Format {
+            file,
+            message: format!(
+                "key mapping returned {} names for {} tensors",
+                mapped.len(),
+                names.len()
+            ),
+        });
+    }
+    let mut ignored = Vec::new();
+    let mut kept = Vec::with_capacity(tensors.len());
+    for (mut t, name) in tensors.into_iter().zip(mapped) {
+        let Some(name) = name else { continue };
+        if name.ends_with("num_batches_tracked") {
+            ignored.push(name);
+            continue;
+        }
+        t.name = name;
+        kept.push(t);
+    }
+    apply_with_report(module, file, "", kept, ignored)
+}
+
+/// Applies the tensors (PyTorch naming, `OUTSIDE`-marked ones never reported) and builds the
+/// report; an error unless every module parameter was loaded with the right shape.
+fn apply_with_report<M: Module>(
+    module: &mut M,
+    file: PathBuf,
+    prefix: &str,
+    kept: Vec<PackTensor>,
+    ignored: Vec<String>,
+) -> Result<LoadReport, WeightsError> {
     let adapter: Box<dyn ModuleAdapter> =
         Box::new(PyTorchToBurnAdapter.chain(FloatCastAdapter::to(DType::F32)));
     let result = module.apply(kept, None, Some(adapter), true);

@@ -1,1 +1,380 @@
-//! `masks`: water, tree and building masks from one segmentation pass per image.
+//! `masks`: water, tree and building masks from ONE segmentation pass per image (paper Sec. 3.2,
+//! release `preprocessing/segmentation/infer_{water,tree,building}_openearthmap.py`).
+//!
+//! Input: every image under a folder (recursive; `.png .tif .tiff .iio .npy`, sorted by path;
+//! outputs are named by file stem, so stems must be unique). Output, in the release's layout
+//! (`../shared/design/segformer-dinov3.md` A.4), for each image `<stem>`:
+//!
+//! ```text
+//! <out>/water_segmentation/masks/<stem>_mask.png      0 = water, 255 = other
+//! <out>/tree_segmentation/masks/<stem>_mask.png       0 = tree, 1 = other
+//! <out>/building_segmentation/masks/<stem>_mask.png   0 = building, 1 = other
+//! <out>/<class>_segmentation/probs/<stem>_<class>_prob.png   uint8(trunc(255·p))
+//! <out>/<class>_segmentation/<class>_percentages.txt         one line per image (rebuilt each run)
+//! <out>/classes/<stem>.png                            the class map (OpenEarthMap ids)
+//! <out>/records/<stem>.json                           written last: the image is finished
+//! <out>/masks.json                                    which segmenter made the folder
+//! ```
+//!
+//! The segmenter is SegFormer (OpenEarthMap mit-b2, `nn::segformer`) with weights, or the offline
+//! [`offline::PixelClassifier`] trained on the procedural world; both go through the same
+//! post-processing (`nn::segformer::postprocess`: small-component removal, hole filling,
+//! building dilation, areas in percent of the image). Masks stay in the frame of the image they
+//! were computed on: `dataset build` rectifies raw-image masks with each pair's homographies.
+//! Resumable (finished images skipped) and shardable over the sorted image list.
+
+pub mod offline;
+pub mod pixel_features;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use dataset::shard::Shard;
+use nn::segformer::postprocess::{argmax_classes, class_mask, percentages_header};
+use nn::segformer::{MaskKind, MaskOptions, Segmentation};
+use raster::formats::{write_png, PngDepth};
+use raster::Image;
+use serde_json::json;
+
+use crate::progress::Progress;
+use crate::teacher::batch::{run_items, BatchSummary};
+use crate::world_io::write_json;
+
+/// File suffixes read as images (case-insensitive).
+pub const IMAGE_SUFFIXES: [&str; 5] = ["png", "tif", "tiff", "iio", "npy"];
+/// Name of the folder record.
+pub const RECORD_FILE: &str = "masks.json";
+
+/// Water, tree and building masks of one image, in one pass.
+pub trait ImageSegmenter {
+    /// Written to `masks.json` and every record.
+    fn name(&self) -> String;
+    /// Masks at the image's own size; `image` holds 8-bit values (0–255), 1–4 channels.
+    fn segment(&self, image: &Image) -> Result<Segmentation>;
+}
+
+/// SegFormer with the release's weights.
+pub struct SegformerSegmenter {
+    pub segmenter: nn::segformer::Segmenter,
+    /// The weights file, for the record.
+    pub weights: PathBuf,
+}
+
+impl SegformerSegmenter {
+    /// Loads the release's checkpoint (`openearthmap_segformer_mit-b2.pt`, or safetensors in HF
+    /// naming) strictly; `preset` `mit-b2` (the release) or `tiny` (the parity fixture);
+    /// `device` `auto`, `cpu`, `wgpu` or `cuda`.
+    pub fn load(weights: &Path, preset: &str, device: &str) -> Result<Self> {
+        use nn::segformer::{SegformerConfig, Segmenter, SegmenterConfig};
+        let config = match preset {
+            "mit-b2" | "mit_b2" => SegmenterConfig::release(),
+            "tiny" => SegmenterConfig::with_model(SegformerConfig::tiny()),
+            other => bail!("unknown SegFormer preset {other:?} (expected mit-b2 or tiny)"),
+        };
+        let device = nn::infer::device_by_name(device).map_err(anyhow::Error::msg)?;
+        let segmenter = Segmenter::from_file(weights, config, &device)
+            .with_context(|| format!("loading SegFormer from {}", weights.display()))?;
+        Ok(SegformerSegmenter {
+            segmenter,
+            weights: weights.to_path_buf(),
+        })
+    }
+}
+
+impl ImageSegmenter for SegformerSegmenter {
+    fn name(&self) -> String {
+        format!("segformer ({})", self.weights.display())
+    }
+
+    fn segment(&self, image: &Image) -> Result<Segmentation> {
+        Ok(self.segmenter.segment(image)?)
+    }
+}
+
+/// The offline default: [`offline::PixelClassifier`] + the release's post-processing.
+pub struct OfflineSegmenter {
+    /// Options of the water, tree and building masks (the release's defaults by default).
+    pub options: [MaskOptions; 3],
+}
+
+impl Default for OfflineSegmenter {
+    fn default() -> Self {
+        OfflineSegmenter {
+            options: MaskKind::ALL.map(MaskOptions::defaults),
+        }
+    }
+}
+
+impl ImageSegmenter for OfflineSegmenter {
+    fn name(&self) -> String {
+        format!(
+            "offline pixel classifier v1 (Gaussian mixtures on colour/texture features, trained on procedural worlds {:?} at {} px)",
+            offline::TRAINING_SEEDS,
+            offline::TRAINING_SIZE
+        )
+    }
+
+    fn segment(&self, image: &Image) -> Result<Segmentation> {
+        let (w, h) = image.size();
+        if w == 0 || h == 0 {
+            bail!("the image is empty");
+        }
+        let model = offline::PixelClassifier::shared()?;
+        let probs = model.probabilities(image);
+        let pred = argmax_classes(&probs, offline::CLASSES);
+        let mask = |i: usize| class_mask(MaskKind::ALL[i], &self.options[i], &probs, &pred, w, h);
+        Ok(Segmentation {
+            classes: Image::new(w, h, 1, pred.iter().map(|&c| c as f32).collect())?,
+            water: mask(0)?,
+            tree: mask(1)?,
+            building: mask(2)?,
+        })
+    }
+}
+
+/// What `masks` does.
+pub struct MasksOptions {
+    pub images_dir: PathBuf,
+    pub out_dir: PathBuf,
+    pub shard: Shard,
+    pub segmenter: Box<dyn ImageSegmenter>,
+}
+
+/// One input image.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InputImage {
+    pub stem: String,
+    /// File name with its extension (the percentage files' first column).
+    pub file_name: String,
+    pub path: PathBuf,
+}
+
+/// The images under `dir` (recursive), sorted by path; duplicate stems are refused (the outputs
+/// are named by stem).
+pub fn list_images(dir: &Path) -> Result<Vec<InputImage>> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+        let entries =
+            std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))?;
+        for e in entries {
+            let path = e
+                .with_context(|| format!("listing {}", dir.display()))?
+                .path();
+            let hidden = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with('.'));
+            if hidden {
+                continue;
+            }
+            if path.is_dir() {
+                walk(&path, out)?;
+            } else {
+                let ext = path
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .unwrap_or("")
+                    .to_ascii_lowercase();
+                if IMAGE_SUFFIXES.contains(&ext.as_str()) {
+                    out.push(path);
+                }
+            }
+        }
+        Ok(())
+    }
+    let mut paths = Vec::new();
+    walk(dir, &mut paths)?;
+    paths.sort();
+    let mut images: Vec<InputImage> = Vec::with_capacity(paths.len());
+    let mut seen = std::collections::HashMap::new();
+    for path in paths {
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("")
+            .to_string();
+        let file_name = path
+            .file_name()
+            .and_then(|s| s.to_str())
+            .unwrap_or("")
+            .to_string();
+        if let Some(other) = seen.insert(stem.clone(), path.clone()) {
+            bail!(
+                "{} and {} have the same stem {stem:?}: outputs are named by stem, rename one",
+                other.display(),
+                path.display()
+            );
+        }
+        images.push(InputImage {
+            stem,
+            file_name,
+            path,
+        });
+    }
+    Ok(images)
+}
+
+/// 8-bit values for the segmenter: NaN → 0, rounded; values above 255 are refused (rescale
+/// 16-bit imagery first).
+pub fn to_8bit(image: &Image, path: &Path) -> Result<Image> {
+    let max = image.finite_range().map_or(0.0, |r| r.1);
+    if max > 255.5 {
+        bail!(
+            "{} has values up to {max}: the segmenters expect 8-bit images (0–255); rescale it first",
+            path.display()
+        );
+    }
+    let mut out = image.clone();
+    for v in out.data_mut() {
+        *v = if v.is_finite() {
+            v.round().clamp(0.0, 255.0)
+        } else {
+            0.0
+        };
+    }
+    Ok(out)
+}
+
+/// Folder of class `kind` in the output.
+pub fn class_dir(out_dir: &Path, kind: MaskKind) -> PathBuf {
+    out_dir.join(format!("{}_segmentation", kind.name()))
+}
+
+/// The mask file of image `stem` (release naming).
+pub fn mask_path(out_dir: &Path, kind: MaskKind, stem: &str) -> PathBuf {
+    class_dir(out_dir, kind)
+        .join("masks")
+        .join(format!("{stem}_mask.png"))
+}
+
+/// The probability picture of image `stem`.
+pub fn prob_path(out_dir: &Path, kind: MaskKind, stem: &str) -> PathBuf {
+    class_dir(out_dir, kind)
+        .join("probs")
+        .join(format!("{stem}_{}_prob.png", kind.name()))
+}
+
+fn record_path(out_dir: &Path, stem: &str) -> PathBuf {
+    out_dir.join("records").join(format!("{stem}.json"))
+}
+
+/// Writes every file of one image's segmentation; the record last.
+pub fn write_segmentation(
+    out_dir: &Path,
+    image: &InputImage,
+    seg: &Segmentation,
+    segmenter: &str,
+) -> Result<()> {
+    let mut lines = serde_json::Map::new();
+    for kind in MaskKind::ALL {
+        let m = seg.get(kind);
+        write_png(
+            mask_path(out_dir, kind, &image.stem),
+            &m.png_values(),
+            PngDepth::Eight,
+        )?;
+        write_png(
+            prob_path(out_dir, kind, &image.stem),
+            &m.probability_u8(),
+            PngDepth::Eight,
+        )?;
+        lines.insert(
+            kind.name().into(),
+            m.percentage_line(&image.file_name).into(),
+        );
+    }
+    write_png(
+        out_dir.join("classes").join(format!("{}.png", image.stem)),
+        &seg.classes,
+        PngDepth::Eight,
+    )?;
+    write_json(
+        &record_path(out_dir, &image.stem),
+        &json!({"image": image.path.display().to_string(), "segmenter": segmenter, "percentages": lines}),
+    )
+}
+
+/// Rebuilds the three `<class>_percentages.txt` from the records present, sorted by file name.
+pub fn write_percentages(out_dir: &Path) -> Result<usize> {
+    let dir = out_dir.join("records");
+    let mut records: Vec<serde_json::Value> = Vec::new();
+    if dir.is_dir() {
+        for e in std::fs::read_dir(&dir).with_context(|| format!("listing {}", dir.display()))? {
+            let p = e?.path();
+            if p.extension().and_then(|e| e.to_str()) != Some("json")
+                || p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with('.'))
+            {
+                continue;
+            }
+            let text =
+                std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+            records.push(
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{} is not valid JSON", p.display()))?,
+            );
+        }
+    }
+    for kind in MaskKind::ALL {
+        let mut lines: Vec<String> = records
+            .iter()
+            .filter_map(|r| r["percentages"][kind.name()].as_str().map(str::to_string))
+            .collect();
+        lines.sort();
+        let text = std::iter::once(percentages_header(kind))
+            .chain(lines)
+            .map(|l| l + "\n")
+            .collect::<String>();
+        let path = class_dir(out_dir, kind).join(format!("{}_percentages.txt", kind.name()));
+        raster::formats::write_atomically(&path, |f| std::io::Write::write_all(f, text.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(records.len())
+}
+
+fn record_segmenter(path: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v["segmenter"].as_str().map(str::to_string)
+}
+
+/// Runs `masks` over the shard's unfinished images, then rebuilds the percentage files.
+pub fn run_masks(opts: &MasksOptions, progress: &dyn Progress) -> Result<BatchSummary> {
+    let images = list_images(&opts.images_dir)?;
+    if images.is_empty() {
+        bail!(
+            "no images ({}) under {}",
+            IMAGE_SUFFIXES.join(", "),
+            opts.images_dir.display()
+        );
+    }
+    let name = opts.segmenter.name();
+    let folder = opts.out_dir.join(RECORD_FILE);
+    match record_segmenter(&folder) {
+        Some(old) if old != name => bail!(
+            "{} holds masks of another segmenter ({old}); write these ({name}) to another folder",
+            opts.out_dir.display()
+        ),
+        Some(_) => {}
+        None => write_json(&folder, &json!({"segmenter": name}))?,
+    }
+    let summary = run_items(
+        &images,
+        &opts.shard,
+        "masks (one segmentation per image)",
+        progress,
+        |im| {
+            record_segmenter(&record_path(&opts.out_dir, &im.stem)).as_deref()
+                == Some(name.as_str())
+        },
+        |im| {
+            let raw = raster::read_image(&im.path)
+                .with_context(|| format!("reading {}", im.path.display()))?;
+            let seg = opts.segmenter.segment(&to_8bit(&raw, &im.path)?)?;
+            write_segmentation(&opts.out_dir, im, &seg, &name)
+        },
+        |im| im.path.display().to_string(),
+    )?;
+    write_percentages(&opts.out_dir)?;
+    Ok(summary)
+}

@@ -78,6 +78,20 @@ impl Report {
         self
     }
 
+    /// A line plot of one or more series against their index + 1 (e.g. scores sorted by rank),
+    /// with an optional dashed vertical marker (e.g. the K of a top-K selection).
+    pub fn line_plot(
+        &mut self,
+        series: &[(&str, &[f64])],
+        x_label: &str,
+        y_label: &str,
+        marker_x: Option<f64>,
+    ) -> &mut Self {
+        self.body
+            .push_str(&svg_line_plot(series, x_label, y_label, marker_x));
+        self
+    }
+
     /// Writes the page atomically.
     pub fn write(&self, path: &Path) -> Result<()> {
         let html = format!(
@@ -136,6 +150,89 @@ fn svg_histogram(values: &[f32], max: f32, bins: usize, x_label: &str) -> String
         x2 = w - 10.0,
         t = h - bottom + 20.0,
         mid = (left + w - 10.0) / 2.0,
+    );
+    svg
+}
+
+const SERIES_COLOURS: [&str; 4] = ["#4a7bd0", "#d0674a", "#3a9a5a", "#8a5ac0"];
+
+fn svg_line_plot(
+    series: &[(&str, &[f64])],
+    x_label: &str,
+    y_label: &str,
+    marker_x: Option<f64>,
+) -> String {
+    let finite = || {
+        series
+            .iter()
+            .flat_map(|(_, v)| v.iter().copied().filter(|v| v.is_finite()))
+    };
+    let n = series
+        .iter()
+        .map(|(_, v)| v.len())
+        .max()
+        .unwrap_or(0)
+        .max(1) as f64;
+    let lo = finite().fold(f64::INFINITY, f64::min);
+    let hi = finite().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = if lo.is_finite() && hi > lo {
+        (lo, hi)
+    } else if lo.is_finite() {
+        (lo - 0.5, lo + 0.5)
+    } else {
+        (0.0, 1.0)
+    };
+    let (w, h, left, bottom, top, right) = (640.0, 260.0, 60.0, 40.0, 24.0, 110.0);
+    let px = |i: f64| left + (w - left - right) * (i - 1.0) / (n - 1.0).max(1.0);
+    let py = |v: f64| h - bottom - (h - bottom - top) * (v - lo) / (hi - lo);
+    let mut svg =
+        format!("<svg width=\"{w}\" height=\"{h}\" xmlns=\"http://www.w3.org/2000/svg\">\n");
+    for (k, (name, values)) in series.iter().enumerate() {
+        let colour = SERIES_COLOURS[k % SERIES_COLOURS.len()];
+        let points: Vec<String> = values
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(i, &v)| format!("{:.1},{:.1}", px(i as f64 + 1.0), py(v)))
+            .collect();
+        let _ = writeln!(
+            svg,
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\
+<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"12\" fill=\"{colour}\">{}</text>",
+            points.join(" "),
+            w - right + 8.0,
+            top + 16.0 * (k as f64 + 1.0),
+            escape(name)
+        );
+    }
+    if let Some(m) = marker_x.filter(|m| m.is_finite()) {
+        let x = px(m.clamp(1.0, n));
+        let _ = writeln!(
+            svg,
+            "<line x1=\"{x:.1}\" y1=\"{top}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#888\" stroke-dasharray=\"4 3\"/>\
+<text x=\"{x:.1}\" y=\"{:.1}\" font-size=\"11\" text-anchor=\"middle\">{m}</text>",
+            h - bottom,
+            top - 6.0
+        );
+    }
+    let _ = writeln!(
+        svg,
+        "<line x1=\"{left}\" y1=\"{yb}\" x2=\"{xr}\" y2=\"{yb}\" stroke=\"#222\"/>\
+<line x1=\"{left}\" y1=\"{top}\" x2=\"{left}\" y2=\"{yb}\" stroke=\"#222\"/>\
+<text x=\"{left}\" y=\"{t}\" font-size=\"12\">1</text>\
+<text x=\"{xr}\" y=\"{t}\" font-size=\"12\" text-anchor=\"end\">{n}</text>\
+<text x=\"{mid}\" y=\"{t}\" font-size=\"12\" text-anchor=\"middle\">{}</text>\
+<text x=\"{lx}\" y=\"{yb}\" font-size=\"11\" text-anchor=\"end\">{lo:.3}</text>\
+<text x=\"{lx}\" y=\"{ty}\" font-size=\"11\" text-anchor=\"end\">{hi:.3}</text>\
+<text x=\"4\" y=\"14\" font-size=\"12\">{}</text></svg>",
+        escape(x_label),
+        escape(y_label),
+        yb = h - bottom,
+        xr = w - right,
+        t = h - bottom + 20.0,
+        mid = (left + w - right) / 2.0,
+        lx = left - 4.0,
+        ty = top + 4.0,
     );
     svg
 }

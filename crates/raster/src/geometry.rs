@@ -249,6 +249,77 @@ pub fn warp_by_disparity(right: &Image, disparity: &Image) -> Result<(Image, Mas
     Ok((Image::new(w, h, c, data)?, Mask::new(w, h, valid)?))
 }
 
+/// The warp of the reference similarity metrics (`warp_right_to_left` in SeasonStereo's
+/// `metrics_common.py`), reproduced operation by operation in f32: non-finite disparities are
+/// replaced by 0, `x_R = x − d`, the grid is normalised as `2·(x_R/(W−1)) − 1` (rows likewise) and
+/// sampled by torch `grid_sample(bilinear, zeros padding, align_corners=True)` (unnormalise
+/// `(g + 1)·(W−1)/2`, floor, four taps, out-of-image taps read 0, summed in torch's order with
+/// fused multiply-adds as its AVX2 kernel is compiled: bit-exact with torch 2.4 on the parity
+/// fixture). Unlike [`warp_by_disparity`] every pixel gets a value (partial taps at the border,
+/// `right(x)` where `d` was not finite), and the mask is torch's `0 ≤ x − d ≤ W−1` on the cleaned
+/// disparity with no slack; the metrics' final mask is that ∧ `d` finite (∧ the ground truth
+/// finite). NaN samples of `right` spread to the taps that touch them, as in torch.
+pub fn warp_by_disparity_grid_sample(right: &Image, disparity: &Image) -> Result<(Image, Mask)> {
+    right.check_same_size(disparity, "warp_by_disparity_grid_sample")?;
+    if disparity.channels() != 1 {
+        return Err(RasterError::Shape(format!(
+            "warp_by_disparity_grid_sample: disparity must have 1 channel, got {}",
+            disparity.channels()
+        )));
+    }
+    let (w, h) = right.size();
+    let c = right.channels();
+    let mut data = vec![0.0f32; w * h * c];
+    let mut valid = vec![false; w * h];
+    if w == 0 || h == 0 {
+        return Ok((Image::new(w, h, c, data)?, Mask::new(w, h, valid)?));
+    }
+    let normalise = |t: f32, n: usize| {
+        if n == 1 {
+            0.0
+        } else {
+            2.0 * (t / (n - 1) as f32) - 1.0
+        }
+    };
+    // grid_sample's align_corners=True unnormalisation, `(g + 1) · ((n − 1)/2)` in f32.
+    let unnormalise = |g: f32, n: usize| (g + 1.0) * ((n - 1) as f32 / 2.0);
+    let tap = |x: i64, y: i64, ch: usize| {
+        if (0..w as i64).contains(&x) && (0..h as i64).contains(&y) {
+            right.get(x as usize, y as usize, ch)
+        } else {
+            0.0
+        }
+    };
+    data.par_chunks_mut(w * c)
+        .zip(valid.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(y, (row, vrow))| {
+            let drow = disparity.row(y);
+            let iy = unnormalise(normalise(y as f32, h), h);
+            let y_n = iy.floor();
+            let n = iy - y_n;
+            let s = 1.0 - n;
+            let y0 = y_n as i64;
+            for (x, (px, v)) in row.chunks_exact_mut(c).zip(vrow.iter_mut()).enumerate() {
+                let d = if drow[x].is_finite() { drow[x] } else { 0.0 };
+                let x_r = x as f32 - d;
+                *v = x_r >= 0.0 && x_r <= (w - 1) as f32;
+                let ix = unnormalise(normalise(x_r, w), w);
+                let x_w = ix.floor();
+                let we = ix - x_w;
+                let e = 1.0 - we;
+                let x0 = x_w as i64;
+                let (nw, ne, sw, se) = (s * e, s * we, n * e, n * we);
+                for (ch, o) in px.iter_mut().enumerate() {
+                    let acc = tap(x0 + 1, y0, ch).mul_add(ne, tap(x0, y0, ch) * nw);
+                    let acc = tap(x0, y0 + 1, ch).mul_add(sw, acc);
+                    *o = tap(x0 + 1, y0 + 1, ch).mul_add(se, acc);
+                }
+            }
+        });
+    Ok((Image::new(w, h, c, data)?, Mask::new(w, h, valid)?))
+}
+
 /// Per-pixel Euclidean distance over channels, `‖a(x, y) − b(x, y)‖₂`, as a single-channel
 /// image: the colour distance of dataset curation (`d_color` is its [`masked_mean`] over the
 /// valid pixels). Sizes and channel counts must match; NaN samples give NaN.
@@ -482,6 +553,26 @@ mod tests {
         assert_eq!(out.data(), &[5., 6., 7.5, 8.5, 10., 11., 0., 0.]);
         assert!(warp_by_disparity(&right, &Image::filled(3, 1, 1, 0.0)).is_err());
         assert!(warp_by_disparity(&right, &Image::filled(4, 1, 2, 0.0)).is_err());
+    }
+
+    #[test]
+    fn grid_sample_warp_reference_semantics() {
+        let right = Image::new(4, 1, 2, vec![0., 1., 10., 11., 20., 21., 30., 31.]).unwrap();
+        // x − d = 0.5, 0.75, −0.5 (outside: half of tap 0 with the zero padding), x = 3 (d = NaN → 0).
+        let disp = Image::new(4, 1, 1, vec![-0.5, 0.25, 2.5, f32::NAN]).unwrap();
+        let (out, mask) = warp_by_disparity_grid_sample(&right, &disp).unwrap();
+        assert_eq!(mask.data(), &[true, true, false, true]);
+        // Grid normalisation round trips cost an ulp, as in torch.
+        let want = [5., 6., 7.5, 8.5, 0., 0.5, 30., 31.];
+        for (got, want) in out.data().iter().zip(want) {
+            assert!((got - want).abs() < 1e-5, "{:?}", out.data());
+        }
+        // Exactly on the last column is valid (no slack needed, no slack given).
+        let edge = Image::new(4, 1, 1, vec![-3.0, 0.0, 0.0, 3.0000002]).unwrap();
+        let (_, mask) = warp_by_disparity_grid_sample(&right, &edge).unwrap();
+        assert_eq!(mask.data(), &[true, true, true, false]);
+        assert!(warp_by_disparity_grid_sample(&right, &Image::filled(3, 1, 1, 0.0)).is_err());
+        assert!(warp_by_disparity_grid_sample(&right, &Image::filled(4, 1, 2, 0.0)).is_err());
     }
 
     #[test]

@@ -1,0 +1,372 @@
+//! The dataset stages: `synthesize`, `dataset build`, `dataset world` (arguments and runs).
+//! Every stage is resumable (finished items are skipped) and shardable (`--shard i/n`).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use clap::{Args, Subcommand, ValueEnum};
+use pipeline::dataset_build::dataset::{Shard, Subset};
+use pipeline::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
+use pipeline::synthesize::synth::api::{GeminiConfig, GeminiGenerator};
+use pipeline::synthesize::synth::prompts::Prompts;
+use pipeline::synthesize::synth::{BuiltinSeasons, Season, SeasonGenerator};
+use pipeline::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
+use pipeline::world_training::{build_world_training, WorldTrainingOptions};
+use pipeline::Progress;
+
+use crate::SgmArgs;
+
+fn parse_shard(s: &str) -> Result<Shard, String> {
+    Shard::parse(s).map_err(|e| e.to_string())
+}
+
+fn parse_season(s: &str) -> Result<Season, String> {
+    s.parse::<Season>().map_err(|e| e.to_string())
+}
+
+/// Which seasonal generator makes the variants.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum GeneratorKind {
+    /// The built-in geometry-preserving appearance model (offline, deterministic).
+    Builtin,
+    /// A generative image-editing API (Gemini `generateContent`); key from --api-key-env.
+    Gemini,
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Inputs: PAIRS/L/<pair>.iio, PAIRS/R/<pair>.iio, PAIRS/homography/<pair>.npz \
+    (the release's synchronic_only/ or `seasonstereo rectify` outputs) and the raw images \
+    RAW/**/<id>.{tif,png,npy,iio} of the pairs' image ids (the release's Track3-RGB-* folders work \
+    as they are). Per image: OUT/cropped/<id>.tif (+ .json, where the crop lies), \
+    OUT/cropped-synthetic/<id>_<season>.tif (variants that passed the geometry-fidelity check), \
+    OUT/rejected/<id>_<season>.tif and OUT/rejected.csv (those that failed: never used), \
+    OUT/variants/<id>.json (written last). Per pair: OUT/rectified/<pair>/{L,R}_<season>.npy, the \
+    variants rectified with the pair's homographies adapted to the crop.\n\n\
+    Resumable: finished images are skipped, a variant already on disk is checked again, not \
+    regenerated. Shardable over the sorted image ids.\n\n\
+    Examples:\n  seasonstereo synthesize --pairs data/synchronic_only --raw data/Train-Track3 \
+    --selected out/curate/selected.txt -o out/synthetic\n  GEMINI_API_KEY=… seasonstereo \
+    synthesize --generator gemini --prompts seasons.toml --pairs P --raw RAW -o out/synthetic"
+)]
+pub struct SynthesizeArgs {
+    /// Synchronic pairs folder (L/, R/, homography/).
+    #[arg(long)]
+    pairs: PathBuf,
+    /// Folder of the raw images (searched recursively by image id).
+    #[arg(long)]
+    raw: PathBuf,
+    /// Output folder.
+    #[arg(short, long, default_value = "out/synthetic")]
+    output: PathBuf,
+    /// Selected pairs: curate's selected.txt or selected.csv. Default: every pair.
+    #[arg(long, value_name = "FILE")]
+    selected: Option<PathBuf>,
+    /// Class maps <id>.png (OpenEarthMap ids, raw frame) handed to the generator as hints.
+    #[arg(long, value_name = "DIR")]
+    classes: Option<PathBuf>,
+    /// Centre crop side, pixels (smaller images are kept whole).
+    #[arg(long, default_value_t = DEFAULT_CROP)]
+    crop: usize,
+    /// Seasons to generate (repeat or comma-separate).
+    #[arg(long, value_delimiter = ',', value_parser = parse_season,
+          default_value = "summer,autumn,winter,spring")]
+    seasons: Vec<Season>,
+    /// Seasonal generator.
+    #[arg(long, value_enum, default_value_t = GeneratorKind::Builtin)]
+    generator: GeneratorKind,
+    /// Seed of the built-in generator.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// API model (gemini).
+    #[arg(long, default_value = pipeline::synthesize::synth::api::DEFAULT_MODEL)]
+    model: String,
+    /// Seasonal prompts, TOML (gemini; default: the built-in prompts).
+    #[arg(long, value_name = "FILE")]
+    prompts: Option<PathBuf>,
+    /// Environment variable holding the API key (gemini; the key is never logged).
+    #[arg(long, default_value = pipeline::synthesize::synth::api::DEFAULT_API_KEY_ENV)]
+    api_key_env: String,
+    /// API endpoint (gemini).
+    #[arg(long, default_value = pipeline::synthesize::synth::api::DEFAULT_BASE_URL)]
+    api_url: String,
+    /// Requests in flight at once (gemini).
+    #[arg(long, default_value_t = 4)]
+    max_concurrent: usize,
+    /// Response cache, so a rerun never pays twice (gemini). Default: OUT/api-cache.
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
+    /// Largest accepted global shift of a variant against its source, pixels.
+    #[arg(long, default_value_t = 0.5)]
+    max_shift: f64,
+    /// Smallest accepted edge score (NCC of the structure maps at zero shift).
+    #[arg(long, default_value_t = 0.6)]
+    min_edge_score: f64,
+    /// Process only shard I of N (0 ≤ I < N) of the sorted image ids (Slurm:
+    /// $SLURM_ARRAY_TASK_ID/N; Kubernetes indexed jobs: $JOB_COMPLETION_INDEX/N).
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, default_value = "0/1")]
+    shard: Shard,
+}
+
+/// Runs `seasonstereo synthesize`.
+pub fn run_synthesize_command(a: SynthesizeArgs, progress: &dyn Progress) -> Result<()> {
+    let mut opts = SynthesizeOptions::new(&a.pairs, &a.raw, &a.output);
+    opts.selected = a.selected;
+    opts.classes_dir = a.classes;
+    opts.crop = a.crop;
+    opts.seasons = a.seasons;
+    opts.shard = a.shard;
+    opts.fidelity.max_shift_px = a.max_shift;
+    opts.fidelity.min_edge_score = a.min_edge_score;
+    let generator: Box<dyn SeasonGenerator> = match a.generator {
+        GeneratorKind::Builtin => Box::new(BuiltinSeasons::new(a.seed)),
+        GeneratorKind::Gemini => {
+            let prompts = match &a.prompts {
+                Some(p) => Prompts::load(p)?,
+                None => Prompts::default(),
+            };
+            let config = GeminiConfig {
+                base_url: a.api_url,
+                model: a.model,
+                api_key_env: a.api_key_env,
+                prompts,
+                max_concurrent: a.max_concurrent.max(1),
+                cache_dir: Some(a.cache.unwrap_or_else(|| a.output.join("api-cache"))),
+                ..GeminiConfig::default()
+            };
+            Box::new(GeminiGenerator::new(config)?)
+        }
+    };
+    eprintln!("generator: {}", generator.name());
+    let s = run_synthesize(&opts, generator.as_ref(), progress)?;
+    let i = &s.images;
+    println!(
+        "images: {} processed, {} already done (skipped), {} in this shard of {}; variants: {} accepted, {} rejected by the fidelity check (see {})",
+        i.done,
+        i.skipped,
+        i.in_shard,
+        i.total,
+        s.accepted,
+        s.rejected,
+        a.output.join("rejected.csv").display()
+    );
+    println!(
+        "pairs rectified: {}{}",
+        s.pairs_rectified,
+        if s.pairs_waiting > 0 {
+            format!(
+                ", {} waiting for images of other shards (`dataset build` rectifies them)",
+                s.pairs_waiting
+            )
+        } else {
+            String::new()
+        }
+    );
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct DatasetArgs {
+    #[command(subcommand)]
+    command: DatasetCommand,
+}
+
+#[derive(Subcommand)]
+enum DatasetCommand {
+    /// Assemble the training set: the 25 season combinations of every selected pair, masks,
+    /// disparities, subsets S1/S2/S3 and manifest, in the layout the trainer reads.
+    Build(BuildArgs),
+    /// A small training set (and validation set) from procedural worlds with exact ground
+    /// truth, made by the real stages: teacher (SGM), synthesize (built-in seasons), dataset build.
+    World(WorldArgs),
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Writes the release's layout under OUT (what `seasonstereo train` and the \
+    released Python trainer read):\n  OUT/<split>/L/<stem>.npy, R/<stem>.npy (stem = \
+    <LEFTID>[__<season>]-<RIGHTID>[__<season>], no tag = real), homography/<pair>.npz, \
+    masks/{L,R}/<pair>.npy (rectified footprint), water_masks/ and tree_masks/ (KEEP masks: \
+    1 = not water / not tree), building_masks/ (1 = building)\n  \
+    OUT/disparity_maps/<teacher>/<pair>.iio, OUT/disparity_maps/GT/<pair>.iio (with --lidar)\n  \
+    OUT/experiments/sub1_synchronic.csv (S1: real only), sub2_synchronic.csv (S2: + synchronic \
+    synthetic), sub5_syndiach.csv (S3: + half synchronic, half diachronic synthetic, S2's budget), \
+    sub3_diachronic.csv (all combinations); sub_val.csv for --split val\n  \
+    OUT/manifest.json, OUT/<split>/summary.txt, missing_files.txt\n\n\
+    Masks: MASKS/{water,tree,building}_segmentation/masks/<id>_mask.png from `seasonstereo masks` \
+    (the class is 0), run on the crops of `synthesize` (OUT/cropped/). A missing file falls back \
+    as in the release (keep everything, no building) and is listed in missing_files.txt.\n\n\
+    Resumable: every file is written atomically and skipped when present; a killed build redoes \
+    at most the file it was writing. Shardable over the sorted pairs; the lists and the manifest \
+    are written when every pair is finished (by the last shard, or by any rerun).\n\n\
+    Example:\n  seasonstereo dataset build --pairs data/synchronic_only --selected \
+    out/curate/selected.txt --synthetic out/synthetic --masks out/masks --teacher out/teacher \
+    -o data/diachronic-stereo-synthetic"
+)]
+struct BuildArgs {
+    /// Synchronic pairs folder (L/, R/, homography/).
+    #[arg(long)]
+    pairs: PathBuf,
+    /// Teacher disparities <pair>.iio of the real pairs (`seasonstereo teacher`).
+    #[arg(long)]
+    teacher: PathBuf,
+    /// Output dataset folder.
+    #[arg(short, long, default_value = "out/dataset")]
+    output: PathBuf,
+    /// Selected pairs: curate's selected.txt or selected.csv. Default: every pair.
+    #[arg(long, value_name = "FILE")]
+    selected: Option<PathBuf>,
+    /// The `synthesize` output folder. Without it only the real pairs are written.
+    #[arg(long, value_name = "DIR")]
+    synthetic: Option<PathBuf>,
+    /// The `masks` output folder (MASKS/{water,tree,building}_segmentation/masks/).
+    #[arg(long, value_name = "DIR")]
+    masks: Option<PathBuf>,
+    /// Name of the segmenter for the manifest. Default: from MASKS, else "none".
+    #[arg(long)]
+    segmenter: Option<String>,
+    /// Folder name of the teacher under disparity_maps/ (default: from teacher.json; MonSter++
+    /// is `monster++` as in the release).
+    #[arg(long)]
+    teacher_name: Option<String>,
+    /// LiDAR-derived disparities <pair>.iio, copied to disparity_maps/GT (configuration (a)).
+    #[arg(long, value_name = "DIR")]
+    lidar: Option<PathBuf>,
+    /// Split to write: train, or val (supervised by its own val/disparity, list sub_val).
+    #[arg(long, default_value = "train")]
+    split: String,
+    /// Seed of the S3 draw (the same seed always gives the same lists).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Also write PNG previews (OUT/<split>/png/).
+    #[arg(long)]
+    preview: bool,
+    /// Process only shard I of N (0 ≤ I < N) of the sorted pairs (Slurm:
+    /// $SLURM_ARRAY_TASK_ID/N; Kubernetes indexed jobs: $JOB_COMPLETION_INDEX/N).
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, default_value = "0/1")]
+    shard: Shard,
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Writes a complete training set (the layout of `dataset build`) to OUT, \
+    its sources to OUT/sources/{train,val}/ (pairs, raw images, class maps, segmentation files, \
+    teacher, exact disparities, variants). Training pairs are supervised by SGM \
+    (disparity_maps/sgm) with the exact disparity as LiDAR (disparity_maps/GT); the validation \
+    split by the exact disparity (val/disparity, experiments/sub_val.csv).\n\n\
+    Example (seconds on a laptop):\n  seasonstereo dataset world --size 128 --worlds 4 \
+    --val-worlds 1 -o out/world-set\n  seasonstereo train --config tiny --data out/world-set"
+)]
+struct WorldArgs {
+    /// Output dataset folder.
+    #[arg(short, long, default_value = "out/world-set")]
+    output: PathBuf,
+    /// World size, pixels.
+    #[arg(long, default_value_t = 256)]
+    size: usize,
+    /// Training worlds (one pair each).
+    #[arg(long, default_value_t = 4)]
+    worlds: usize,
+    /// Validation worlds.
+    #[arg(long, default_value_t = 1)]
+    val_worlds: usize,
+    /// Seed of the first training world (validation worlds start at SEED + 10000).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seed of the built-in seasonal generator.
+    #[arg(long, default_value_t = 0)]
+    generator_seed: u64,
+    /// Seed of the S3 draw.
+    #[arg(long, default_value_t = 0)]
+    subset_seed: u64,
+    /// Also write PNG previews.
+    #[arg(long)]
+    preview: bool,
+    #[command(flatten)]
+    sgm: SgmArgs,
+}
+
+fn print_build(split: &str, s: &BuildSummary, out: &std::path::Path) {
+    println!(
+        "{split}: {} pairs ({} in this shard): {} built now, {} already built; {} combinations written, {} already there",
+        s.pairs, s.pairs_in_shard, s.pairs_done, s.pairs_skipped, s.combinations_written, s.combinations_skipped
+    );
+    if s.missing_masks > 0 {
+        println!(
+            "warning: {} segmentation masks were missing; the release's defaults were used (keep all, no building): see {}",
+            s.missing_masks,
+            out.join(split).join("missing_files.txt").display()
+        );
+    }
+    if s.finalized {
+        for (label, c) in &s.subsets {
+            println!(
+                "  {label:4} {:6} rows: {} real, {} synchronic synthetic, {} diachronic",
+                c.total, c.real, c.synchronic_synthetic, c.diachronic
+            );
+        }
+        println!("manifest: {}", out.join("manifest.json").display());
+    } else {
+        println!(
+            "{} pairs are not finished yet (other shards): the last shard to finish, or a rerun, writes the subsets and the manifest",
+            s.pending
+        );
+    }
+}
+
+/// Runs `seasonstereo dataset …`.
+pub fn run_dataset(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
+    match a.command {
+        DatasetCommand::Build(b) => {
+            let mut opts = BuildOptions::new(&b.pairs, &b.teacher, &b.output);
+            opts.selected = b.selected;
+            opts.synthetic_dir = b.synthetic;
+            if let Some(m) = &b.masks {
+                if !m.is_dir() {
+                    bail!("--masks {}: no such folder", m.display());
+                }
+                opts.masks = MaskDirs::release(m);
+            }
+            opts.segmenter = match (b.segmenter, &b.masks) {
+                (Some(s), _) => s,
+                (None, Some(m)) => MaskDirs::recorded_segmenter(m)
+                    .unwrap_or_else(|| format!("masks from {}", m.display())),
+                (None, None) => "none (release defaults)".into(),
+            };
+            opts.teacher_name = b.teacher_name;
+            opts.lidar_dir = b.lidar;
+            opts.split = b.split.clone();
+            opts.seed = b.seed;
+            opts.previews = b.preview;
+            opts.shard = b.shard;
+            let s = run_build(&opts, progress)?;
+            print_build(&b.split, &s, &b.output);
+        }
+        DatasetCommand::World(w) => {
+            let mut opts = WorldTrainingOptions::new(&w.output, w.size, w.worlds, w.val_worlds);
+            opts.seed = w.seed;
+            opts.generator_seed = w.generator_seed;
+            opts.subset_seed = w.subset_seed;
+            opts.previews = w.preview;
+            opts.sgm = w.sgm.params()?;
+            let s = build_world_training(&opts, progress)?;
+            println!(
+                "{} training and {} validation worlds of {}² px (disparity range {}..{} px); variants rejected: {} (train), {} (val)",
+                s.train.worlds, s.val.worlds, w.size, s.range.0, s.range.1,
+                s.train.synthesize.rejected, s.val.synthesize.rejected
+            );
+            print_build("train", &s.train.build, &w.output);
+            if s.val.worlds > 0 {
+                print_build("val", &s.val.build, &w.output);
+            }
+            println!(
+                "train with: experiments/{}.csv (S1), {}.csv (S2), {}.csv (S3), {}.csv (all)",
+                Subset::S1.csv_name(),
+                Subset::S2.csv_name(),
+                Subset::S3.csv_name(),
+                Subset::All.csv_name()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,265 @@
+//! The data stages of the training set: `teacher`, `curate`, `masks` (arguments and runs).
+//! Every stage is resumable (finished items are skipped) and shardable (`--shard i/n`).
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::{Args, ValueEnum};
+use pipeline::curate::{self, features, ColourStatistic, CurateOptions, SsimScale};
+use pipeline::masks::{self, MasksOptions, OfflineSegmenter, SegformerSegmenter};
+use pipeline::teacher::batch::{BatchSummary, Shard};
+use pipeline::teacher::{self, Teacher, TeacherOptions};
+
+use crate::{parse_range, Model, NetworkArgs, SgmArgs};
+
+fn parse_shard(s: &str) -> Result<Shard, String> {
+    Shard::parse(s).map_err(|e| e.to_string())
+}
+
+/// `--shard i/n`, shared by the stages.
+#[derive(Args)]
+pub struct ShardArg {
+    /// Process only shard I of N (0 ≤ I < N): the items at positions ≡ I mod N of the sorted
+    /// list, for array jobs (Slurm: --shard $SLURM_ARRAY_TASK_ID/$N; Kubernetes indexed jobs:
+    /// --shard $JOB_COMPLETION_INDEX/$N). Default: everything.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, default_value = "0/1")]
+    shard: Shard,
+}
+
+fn report(what: &str, s: &BatchSummary) {
+    println!(
+        "{what}: {} processed, {} already done (skipped), {} in this shard of {} items",
+        s.done, s.skipped, s.in_shard, s.total
+    );
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Reads PAIRS/L/<stem>.iio|npy and PAIRS/R/<stem>.iio|npy (the release's \
+    synchronic_only/ layout or `seasonstereo rectify` outputs); writes OUT/<stem>.iio (float32, NaN = \
+    no disparity) and OUT/teacher.json (which teacher). Existing disparities are kept (resumable); a \
+    folder holds one teacher only.\n\n\
+    SGM range: --range, else PAIRS/rectify/<stem>.json (from `rectify`), else estimated from the \
+    images.\n\n\
+    Examples:\n  seasonstereo teacher --pairs data/synchronic_only -o data/teacher/sgm\n  \
+    seasonstereo teacher --pairs data/synchronic_only -o data/teacher/monster++ --model monsterpp \
+    --weights monster++-mix_all.pth --config vitl --shard $SLURM_ARRAY_TASK_ID/16"
+)]
+pub struct TeacherArgs {
+    /// Folder of rectified pairs (L/, R/).
+    #[arg(long, value_name = "DIR")]
+    pairs: PathBuf,
+    /// Output folder of the teacher disparities.
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    #[command(flatten)]
+    net: NetworkArgs,
+    /// SGM disparity range MIN:MAX for every pair (pixels, inclusive).
+    #[arg(long, value_parser = parse_range, allow_hyphen_values = true, conflicts_with = "model")]
+    range: Option<(i32, i32)>,
+    #[command(flatten)]
+    sgm: SgmArgs,
+    #[command(flatten)]
+    shard: ShardArg,
+}
+
+pub fn run_teacher(a: TeacherArgs, progress: &dyn pipeline::Progress) -> Result<()> {
+    let teacher = match a.net.model {
+        Some(Model::Monsterpp) => Teacher::Monster(a.net.monster_options()?),
+        None => Teacher::Sgm {
+            params: a.sgm.params()?,
+            range: a.range,
+        },
+    };
+    let name = teacher.record()["teacher"]
+        .as_str()
+        .unwrap_or("?")
+        .to_string();
+    let opts = TeacherOptions {
+        pairs_dir: a.pairs,
+        out_dir: a.output,
+        teacher,
+        shard: a.shard.shard,
+    };
+    let s = teacher::run_teacher(&opts, progress)?;
+    report(&format!("teacher {name}"), &s);
+    println!("disparities in {}", opts.out_dir.display());
+    Ok(())
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum ColourArg {
+    /// Mean per-pixel RGB distance (paper).
+    Mean,
+    /// 0.5·mean + 0.5·95th percentile (the release's color_distance_rgb).
+    Release,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SsimArg {
+    /// clamp(SSIM, 0, 1): the release's raw mean SSIM, negatives clipped.
+    Clamp,
+    /// (1 + SSIM)/2.
+    Affine,
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Per pair (cached in OUT/scores/<stem>.json, resumable, shardable): the right \
+    image warped by the teacher disparity (x_R = x_L − d), then over valid pixels d_color, SSIM \
+    (scikit-image defaults: 7×7 uniform window) and S_feat (cosine similarity of DINOv3 CLS features \
+    with --dinov3, else of an offline colour/gradient histogram descriptor). When every pair is \
+    scored: d_max = 95th percentile of d_color (numpy linear), S_color = 1 − min(d_color, d_max)/d_max, \
+    S_comb = 0.5 (S_color + S_SSIM), ranks by S_comb and S_feat, selection = both top-K.\n\n\
+    Outputs: OUT/scores.csv, OUT/selected.txt, OUT/selected.csv, OUT/curate.json, OUT/report.html. \
+    With --shard, each shard scores its pairs; the ranking runs once all pairs are scored (rerun \
+    without --shard to force it).\n\n\
+    Example: seasonstereo curate --pairs data/synchronic_only --teacher data/teacher/sgm -o data/curate \
+    --keep 1000"
+)]
+pub struct CurateArgs {
+    /// Folder of rectified pairs (L/, R/).
+    #[arg(long, value_name = "DIR")]
+    pairs: PathBuf,
+    /// Folder of the teacher disparities (<stem>.iio), from `seasonstereo teacher`.
+    #[arg(long, value_name = "DIR")]
+    teacher: PathBuf,
+    /// Output folder.
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    /// Pairs kept by each ranking: a count (1000, the paper's K of 1,565 pairs), a percentage
+    /// (64%) or a fraction (0.64).
+    #[arg(long, value_name = "K", default_value = "64%", value_parser = curate::select::Keep::parse)]
+    keep: curate::select::Keep,
+    /// Which statistic of the per-pixel colour distances is d_color.
+    #[arg(long, value_enum, default_value_t = ColourArg::Mean)]
+    colour_distance: ColourArg,
+    /// How the mean SSIM becomes S_SSIM in [0, 1].
+    #[arg(long, value_enum, default_value_t = SsimArg::Clamp)]
+    ssim_scale: SsimArg,
+    /// DINOv3 weights (HF safetensors or .pth, e.g. dinov3-vitl16-pretrain-sat493m) for S_feat;
+    /// without them the offline descriptor is used (named in the outputs).
+    #[arg(long, value_name = "FILE")]
+    dinov3: Option<PathBuf>,
+    /// DINOv3 layout: vits16, vitb16, vitl16, tiny. Default: inferred from the checkpoint.
+    #[arg(long, value_name = "PRESET", requires = "dinov3")]
+    dinov3_config: Option<String>,
+    /// DINOv3 input normalisation: imagenet (the HF processor's default) or sat493m.
+    #[arg(
+        long,
+        value_name = "NAME",
+        default_value = "imagenet",
+        requires = "dinov3"
+    )]
+    dinov3_normalisation: String,
+    /// Where DINOv3 runs: auto, cpu, wgpu or cuda.
+    #[arg(long, default_value = "auto")]
+    device: String,
+    #[command(flatten)]
+    shard: ShardArg,
+}
+
+pub fn run_curate(a: CurateArgs, progress: &dyn pipeline::Progress) -> Result<()> {
+    let features: Box<dyn features::FeatureSimilarity> = match &a.dinov3 {
+        Some(w) => Box::new(features::Dinov3Similarity::load(
+            w,
+            a.dinov3_config.as_deref(),
+            &a.dinov3_normalisation,
+            &a.device,
+        )?),
+        None => Box::new(features::HistogramDescriptor),
+    };
+    let opts = CurateOptions {
+        pairs_dir: a.pairs,
+        teacher_dir: a.teacher,
+        out_dir: a.output,
+        keep: a.keep,
+        colour: match a.colour_distance {
+            ColourArg::Mean => ColourStatistic::Mean,
+            ColourArg::Release => ColourStatistic::ReleaseMeanP95,
+        },
+        ssim_scale: match a.ssim_scale {
+            SsimArg::Clamp => SsimScale::Clamp,
+            SsimArg::Affine => SsimScale::Affine,
+        },
+        shard: a.shard.shard,
+        features,
+    };
+    println!("S_feat: {}", opts.features.name());
+    let s = curate::run_curate(&opts, progress)?;
+    report("curate scoring", &s.scoring);
+    match &s.ranking {
+        Some(r) => println!(
+            "{} of {} pairs selected (K = {}, d_max = {:.3}): {}; scores: {}; report: {}",
+            r.selected.len(),
+            r.rows.len(),
+            r.k,
+            r.d_max,
+            r.selected_txt.display(),
+            r.scores_csv.display(),
+            r.report.display()
+        ),
+        None => println!(
+            "{} pairs have no score yet (other shards); the ranking runs once every pair is scored",
+            s.missing
+        ),
+    }
+    Ok(())
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "One segmentation per image gives the water, tree and building masks in the \
+    release's layout: OUT/{water,tree,building}_segmentation/masks/<stem>_mask.png (the class is 0; \
+    other pixels 255 for water, 1 for tree and building), probs/<stem>_<class>_prob.png, \
+    <class>_percentages.txt, plus OUT/classes/<stem>.png (OpenEarthMap ids). Post-processing as the \
+    release: water components < 0.1 % removed and holes < 0.1 % filled, tree components < 0.05 % \
+    removed, buildings dilated by 3 px.\n\n\
+    Segmenter: SegFormer (OpenEarthMap mit-b2) with --segformer, else an offline pixel classifier \
+    trained on the procedural world (named in OUT/masks.json). Images must be 8-bit (0–255).\n\n\
+    Example: seasonstereo masks --images data/raw_crops -o data/segmentation --segformer \
+    checkpoints/openearthmap_segformer_mit-b2.pt"
+)]
+pub struct MasksArgs {
+    /// Folder of images (searched recursively: .png .tif .tiff .iio .npy); outputs are named by
+    /// file stem.
+    #[arg(long, value_name = "DIR")]
+    images: PathBuf,
+    /// Output folder.
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    /// SegFormer weights (the release's openearthmap_segformer_mit-b2.pt or HF safetensors).
+    #[arg(long, value_name = "FILE")]
+    segformer: Option<PathBuf>,
+    /// SegFormer layout: mit-b2 (the release) or tiny (the parity fixture).
+    #[arg(
+        long,
+        value_name = "PRESET",
+        default_value = "mit-b2",
+        requires = "segformer"
+    )]
+    segformer_config: String,
+    /// Where SegFormer runs: auto, cpu, wgpu or cuda.
+    #[arg(long, default_value = "auto")]
+    device: String,
+    #[command(flatten)]
+    shard: ShardArg,
+}
+
+pub fn run_masks(a: MasksArgs, progress: &dyn pipeline::Progress) -> Result<()> {
+    let segmenter: Box<dyn masks::ImageSegmenter> = match &a.segformer {
+        Some(w) => Box::new(SegformerSegmenter::load(w, &a.segformer_config, &a.device)?),
+        None => Box::new(OfflineSegmenter::default()),
+    };
+    let opts = MasksOptions {
+        images_dir: a.images,
+        out_dir: a.output,
+        shard: a.shard.shard,
+        segmenter,
+    };
+    println!("segmenter: {}", opts.segmenter.name());
+    let s = masks::run_masks(&opts, progress)?;
+    report("masks", &s);
+    println!("masks in {}", opts.out_dir.display());
+    Ok(())
+}

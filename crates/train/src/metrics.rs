@@ -1,0 +1,164 @@
+//! Run logs: one CSV row per step (`metrics.csv`) and per validation (`validation.csv`), and the
+//! validation scores.
+//!
+//! The logs are appended to (one line per event, flushed), not rewritten: at 50,000 steps a
+//! rewrite per step would cost quadratic time. On resume the rows past the resumed step (written
+//! after the checkpoint by the interrupted run) are dropped (the file is rewritten atomically
+//! once) so the log reads as one uninterrupted run.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::TrainError;
+
+/// Header of `metrics.csv`.
+pub const METRICS_HEADER: &str =
+    "step,lr,total,disp,photo,smooth,epe,within_1px,within_3px,grad_norm,clip_factor,seconds,its_per_s";
+/// Header of `validation.csv`.
+pub const VALIDATION_HEADER: &str =
+    "step,epe,bad_1px,bad_3px,pairs,epe_synchronic,epe_diachronic,seconds";
+
+/// An append-only CSV log with a fixed header.
+pub struct CsvLog {
+    path: PathBuf,
+    file: File,
+}
+
+impl CsvLog {
+    /// Opens `path` for appending. With `resume_step = Some(s)` the rows whose first column is
+    /// greater than `s` are removed first; without it the file is started afresh.
+    pub fn open(path: &Path, header: &str, resume_step: Option<usize>) -> Result<Self, TrainError> {
+        let keep: Vec<String> = match (resume_step, std::fs::read_to_string(path)) {
+            (Some(s), Ok(text)) => text
+                .lines()
+                .skip(1)
+                .filter(|l| {
+                    l.split(',')
+                        .next()
+                        .and_then(|v| v.parse::<usize>().ok())
+                        .is_some_and(|step| step <= s)
+                })
+                .map(str::to_string)
+                .collect(),
+            _ => Vec::new(),
+        };
+        raster::formats::write_atomically(path, |f| {
+            writeln!(f, "{header}")?;
+            for l in &keep {
+                writeln!(f, "{l}")?;
+            }
+            Ok(())
+        })
+        .map_err(|e| TrainError::Io(e.to_string()))?;
+        let file = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(|e| TrainError::io(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            file,
+        })
+    }
+
+    /// Appends one row (values joined by commas) and flushes it.
+    pub fn row(&mut self, values: &[String]) -> Result<(), TrainError> {
+        writeln!(self.file, "{}", values.join(","))
+            .and_then(|_| self.file.flush())
+            .map_err(|e| TrainError::io(&self.path, e))
+    }
+}
+
+/// Disparity scores of a validation pass: mean end-point error and the fractions of pixels off
+/// by more than 1 and 3 px, averaged per pair as the release does.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ValidationScores {
+    pub epe: f64,
+    pub bad_1px: f64,
+    pub bad_3px: f64,
+    /// Pairs scored (pairs whose mask is empty are skipped, as the release does).
+    pub pairs: usize,
+    pub epe_synchronic: Option<f64>,
+    pub epe_diachronic: Option<f64>,
+}
+
+/// Per-pair accumulator of [`ValidationScores`].
+#[derive(Debug, Clone, Default)]
+pub struct ValidationAccumulator {
+    sums: [f64; 3],
+    pairs: usize,
+    by_kind: [(f64, usize); 2],
+}
+
+/// One pair's (EPE, bad-1, bad-3) over `valid`, or `None` when no pixel is valid.
+pub fn pair_scores(prediction: &[f32], truth: &[f32], valid: &[bool]) -> Option<[f64; 3]> {
+    let (mut n, mut n_finite) = (0usize, 0usize);
+    let mut sums = [0f64; 3];
+    for ((&p, &t), &v) in prediction.iter().zip(truth).zip(valid) {
+        if !(v && t.is_finite()) {
+            continue;
+        }
+        n += 1;
+        // A non-finite prediction counts as bad at every threshold; the EPE averages the finite
+        // ones (it would otherwise be NaN).
+        if !p.is_finite() {
+            sums[1] += 1.0;
+            sums[2] += 1.0;
+            continue;
+        }
+        let e = (p - t).abs() as f64;
+        n_finite += 1;
+        sums[0] += e;
+        sums[1] += (e > 1.0) as u8 as f64;
+        sums[2] += (e > 3.0) as u8 as f64;
+    }
+    (n > 0).then(|| {
+        [
+            if n_finite > 0 {
+                sums[0] / n_finite as f64
+            } else {
+                f64::NAN
+            },
+            sums[1] / n as f64,
+            sums[2] / n as f64,
+        ]
+    })
+}
+
+impl ValidationAccumulator {
+    /// Adds one pair's scores.
+    pub fn add(&mut self, scores: [f64; 3], diachronic: bool) {
+        for (s, v) in self.sums.iter_mut().zip(scores) {
+            *s += v;
+        }
+        self.pairs += 1;
+        let k = &mut self.by_kind[diachronic as usize];
+        k.0 += scores[0];
+        k.1 += 1;
+    }
+
+    /// The averages (`None` when no pair could be scored).
+    pub fn finish(&self) -> Option<ValidationScores> {
+        if self.pairs == 0 {
+            return None;
+        }
+        let n = self.pairs as f64;
+        let kind = |(s, c): (f64, usize)| (c > 0).then(|| s / c as f64);
+        Some(ValidationScores {
+            epe: self.sums[0] / n,
+            bad_1px: self.sums[1] / n,
+            bad_3px: self.sums[2] / n,
+            pairs: self.pairs,
+            epe_synchronic: kind(self.by_kind[0]),
+            epe_diachronic: kind(self.by_kind[1]),
+        })
+    }
+}
+
+/// Peak resident memory of this process in bytes (Linux `VmHWM`; `None` elsewhere).
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
