@@ -9,7 +9,7 @@ use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::{
     AvgPoolOptions, GridSampleOptions, GridSamplePaddingMode, InterpolateMode,
 };
-use burn::tensor::{Bool, Int, Tensor};
+use burn::tensor::{Bool, Tensor};
 
 use super::config::DisparityPenalty;
 
@@ -50,26 +50,8 @@ pub fn disparity_error_map(
 /// `warp_image`: `grid_sample(align_corners=True)` on the grid `(x − d, y)` normalised by
 /// `size − 1`, i.e. the exact sub-pixel position, no half-pixel shift.
 pub fn warp_right_to_left(right: Tensor<4>, disparity: Tensor<4>) -> Tensor<4> {
-    let [b, _, h, w] = disparity.dims();
-    let device = disparity.device();
-    let xs = Tensor::<1, Int>::arange(0..w as i64, &device)
-        .float()
-        .reshape([1, 1, 1, w]);
-    let ys = Tensor::<1, Int>::arange(0..h as i64, &device)
-        .float()
-        .reshape([1, 1, h, 1]);
-    let normalise = |v: Tensor<4>, size: usize| {
-        if size > 1 {
-            v.div_scalar((size - 1) as f32)
-                .mul_scalar(2.0)
-                .sub_scalar(1.0)
-        } else {
-            v.mul_scalar(0.0)
-        }
-    };
-    let gx = normalise(xs - disparity, w);
-    let gy = normalise(ys, h).expand([b, 1, h, w]);
-    let grid = Tensor::cat(vec![gx, gy], 1).permute([0, 2, 3, 1]);
+    // The same `(x − d, y)` grid as MonSter++'s own warp; only the sampling options differ.
+    let grid = nn::monster::warp::disp_warp_grid(disparity);
     let opts = GridSampleOptions::new(InterpolateMode::Bilinear)
         .with_padding_mode(GridSamplePaddingMode::Zeros)
         .with_align_corners(true);
