@@ -1,5 +1,9 @@
 //! Neural networks on burn for seasonstereo: the MonSter++ stereo network (accuracy model), its
-//! weight import from PyTorch/safetensors checkpoints, and inference.
+//! weight import from PyTorch/safetensors checkpoints, and inference; and the two networks of the
+//! dataset stages, [`dinov3`] (DINOv3 ViT features for the curation similarity score) and
+//! [`segformer`] (SegFormer OpenEarthMap segmentation for the water, tree and building masks),
+//! each with the exact pre- and post-processing of the release and parity tests against the
+//! upstream fixtures.
 //!
 //! The default backend is burn's pure-Rust CPU backend `flex`; GPU backends are opt-in features
 //! (`wgpu`, `cuda`). Layout of the network: `../shared/design/monsterpp.md`.
