@@ -49,16 +49,22 @@ fn stem_of(filename: &str) -> &str {
     }
 }
 
+/// Reads a text file the stages write; a missing one is an error that says which stage writes it
+/// (`hint`).
+pub(crate) fn read_text(path: &Path, hint: &str) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => DatasetError::missing(path, hint),
+        _ => DatasetError::io(path, e),
+    })
+}
+
 /// Reads an experiment list. As the release: duplicate stems are dropped (first kept) and blank
 /// filenames skipped; unlike it, a malformed stem or flag is an error naming the line.
 pub fn read_experiment_csv(path: &Path) -> Result<Vec<ExperimentRow>> {
-    let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => DatasetError::missing(
-            path,
-            "write experiment lists with `seasonstereo dataset build` or `dataset world`",
-        ),
-        _ => DatasetError::io(path, e),
-    })?;
+    let text = read_text(
+        path,
+        "write experiment lists with `seasonstereo dataset build` or `dataset world`",
+    )?;
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_reader(text.as_bytes());
@@ -127,13 +133,10 @@ pub fn write_aois(path: &Path, stems: &[PairStem]) -> Result<()> {
 /// `selected.txt`) or a CSV with a stem column (`id` as curate's `selected.csv`, `stem`, `pair` or
 /// `filename`). Only real pairs are accepted; duplicates are dropped, order is kept.
 pub fn read_pair_list(path: &Path) -> Result<Vec<PairStem>> {
-    let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => DatasetError::missing(
-            path,
-            "the selected pairs are written by `seasonstereo curate`",
-        ),
-        _ => DatasetError::io(path, e),
-    })?;
+    let text = read_text(
+        path,
+        "the selected pairs are written by `seasonstereo curate`",
+    )?;
     let is_csv = path.extension().and_then(|e| e.to_str()) == Some("csv");
     let mut names: Vec<(usize, String)> = Vec::new();
     if is_csv {

@@ -100,12 +100,7 @@ impl Manifest {
 
     /// Reads a manifest.
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => {
-                DatasetError::missing(path, "written by `seasonstereo dataset build`")
-            }
-            _ => DatasetError::io(path, e),
-        })?;
+        let text = crate::experiment::read_text(path, "written by `seasonstereo dataset build`")?;
         serde_json::from_str(&text).map_err(|e| DatasetError::format(path, e.to_string()))
     }
 
