@@ -5,9 +5,9 @@
 //! warped into the left view by the teacher's disparity (x_R = x_L − d, the release's `grid_sample`
 //! warp: `raster::geometry::warp_by_disparity_grid_sample`);
 //! over the valid pixels (finite disparity, inside the right image) come the colour distance
-//! statistics, the SSIM ([`ssim`]: scikit-image defaults, 7×7 uniform window) and `S_feat`, the
-//! cosine similarity of image features ([`features`]: DINOv3 with weights, else the offline
-//! [`features::HistogramDescriptor`]).
+//! statistics, the SSIM ([`raster::ssim::ssim_uniform_masked`]: scikit-image defaults, 7×7
+//! uniform window) and `S_feat`, the cosine similarity of image features ([`features`]: DINOv3
+//! with weights, else the offline [`features::HistogramDescriptor`]).
 //!
 //! Over all cached pairs (run when every pair has a score; with `--shard` the last shard to
 //! finish does it, and a plain rerun always can):
@@ -33,7 +33,6 @@
 pub mod features;
 pub mod score;
 pub mod select;
-pub mod ssim;
 
 use std::path::{Path, PathBuf};
 

@@ -307,7 +307,7 @@ fn real_image(pairs_dir: &Path, pair: &PairStem, side: Side) -> Result<Image> {
     let name = pair.base_name();
     let p = find_image(&pairs_dir.join(side.dir()), &name)?
         .with_context(|| format!("no {}/{name}.iio in {}", side.dir(), pairs_dir.display()))?;
-    let mut im = crate::synthesize::to_rgb(&raster::read_image(&p)?)?;
+    let mut im = raster::read_image(&p)?.to_rgb();
     zero_invalid(&mut im);
     Ok(im)
 }

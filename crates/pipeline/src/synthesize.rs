@@ -306,26 +306,6 @@ pub fn index_files(dir: &Path, exts: &[&str]) -> Result<HashMap<String, PathBuf>
     Ok(out)
 }
 
-/// The image as RGB: 1 channel repeated, channels beyond 3 dropped (as the release reads).
-pub fn to_rgb(image: &Image) -> Result<Image> {
-    let c = image.channels();
-    if c == 3 {
-        return Ok(image.clone());
-    }
-    let data: Vec<f32> = image
-        .data()
-        .chunks(c)
-        .flat_map(|p| {
-            if c >= 3 {
-                [p[0], p[1], p[2]]
-            } else {
-                [p[0]; 3]
-            }
-        })
-        .collect();
-    Ok(Image::new(image.width(), image.height(), 3, data)?)
-}
-
 /// Replaces non-finite values by 0 (the black border of rectified training images).
 pub fn zero_invalid(image: &mut Image) {
     for v in image.data_mut() {
@@ -439,7 +419,7 @@ fn synthesize_image(
             opts.raw_dir.display()
         )
     })?;
-    let image = to_rgb(&raster::read_image(path)?)?;
+    let image = raster::read_image(path)?.to_rgb();
     let crop = CropRecord::centred(image.width(), image.height(), opts.crop);
     let (cropped, _) = centre_crop(&image, crop.width, crop.height)?;
     let class_crop = match classes.get(id) {
@@ -597,7 +577,7 @@ pub fn rectified_variant(
             crop.height
         );
     }
-    let (mut image, _) = warp_homography(&to_rgb(&variant)?, &crop.adapt(h), size.0, size.1)?;
+    let (mut image, _) = warp_homography(&variant.to_rgb(), &crop.adapt(h), size.0, size.1)?;
     zero_invalid(&mut image);
     write_npy(&out, &image)?;
     Ok(image)
@@ -658,13 +638,5 @@ mod tests {
         // Crop pixel (0, 0) is raw pixel (512, 512); through H = translation(3, -2).
         let h = c.adapt(&Homography::translation(3.0, -2.0));
         assert_eq!(h.apply(0.0, 0.0), (515.0, 510.0));
-    }
-
-    #[test]
-    fn rgb_conversion() {
-        let g = Image::new(2, 1, 1, vec![1.0, 2.0]).unwrap();
-        assert_eq!(to_rgb(&g).unwrap().data(), &[1.0, 1.0, 1.0, 2.0, 2.0, 2.0]);
-        let rgba = Image::new(1, 1, 4, vec![1.0, 2.0, 3.0, 4.0]).unwrap();
-        assert_eq!(to_rgb(&rgba).unwrap().data(), &[1.0, 2.0, 3.0]);
     }
 }

@@ -188,11 +188,8 @@ pub fn build_world_training(
 
 /// The disparity search range of the worlds of `size` (the same for every seed).
 pub fn world_range(size: usize) -> (i32, i32) {
-    // The range depends on the cameras and the scene's altitude span only.
-    let params = WorldParams::new(size, 1);
-    let scene_max = params.scene.relief_m + world::scene::MAX_OBJECT_HEIGHT_M + 1.0;
-    let (a, b) = (params.disparity_at(-1.0), params.disparity_at(scene_max));
-    (a.min(b).floor() as i32, a.max(b).ceil() as i32)
+    // The range depends on the cameras and the scene's altitude span only, not on the seed.
+    WorldParams::new(size, 1).disparity_range()
 }
 
 /// Writes the sources of world `seed` under `src` (skipped when its homography, written last,

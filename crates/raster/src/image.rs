@@ -139,6 +139,31 @@ impl Image {
         }
     }
 
+    /// The image as RGB, the way the reference scripts read rasters: grey (± alpha) repeated,
+    /// channels past the third (alpha, near infrared) dropped.
+    pub fn to_rgb(&self) -> Image {
+        if self.channels == 3 {
+            return self.clone();
+        }
+        let data = self
+            .data
+            .chunks_exact(self.channels)
+            .flat_map(|p| {
+                if p.len() < 3 {
+                    [p[0]; 3]
+                } else {
+                    [p[0], p[1], p[2]]
+                }
+            })
+            .collect();
+        Image {
+            width: self.width,
+            height: self.height,
+            channels: 3,
+            data,
+        }
+    }
+
     /// A grey-level version: the mean of the first three channels of a colour image (the first
     /// channel otherwise; a 4th alpha channel is ignored).
     pub fn to_gray(&self) -> Image {
@@ -367,5 +392,16 @@ mod tests {
         assert_eq!(a.and(&b).unwrap().data(), &[true, false]);
         assert_eq!(a.and_not(&b).unwrap().data(), &[false, true]);
         assert!(a.and(&Mask::filled(1, 1, true)).is_err());
+    }
+
+    #[test]
+    fn rgb_conversion() {
+        let g = Image::new(2, 1, 1, vec![1.0, 2.0]).unwrap();
+        assert_eq!(g.to_rgb().data(), &[1.0, 1.0, 1.0, 2.0, 2.0, 2.0]);
+        let ga = Image::new(1, 1, 2, vec![7.0, 255.0]).unwrap();
+        assert_eq!(ga.to_rgb().data(), &[7.0, 7.0, 7.0]);
+        let rgba = Image::new(1, 1, 4, vec![1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert_eq!(rgba.to_rgb().data(), &[1.0, 2.0, 3.0]);
+        assert_eq!(rgba.to_rgb().channels(), 3);
     }
 }

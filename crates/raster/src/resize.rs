@@ -4,14 +4,15 @@
 //! down-scale factor, applied width first, then height:
 //! - [`resize_pil_bilinear_u8`]: Pillow's `Image.resize(..., BILINEAR)` on 8-bit data (SegFormer
 //!   input). Weights in f64, converted to 22-bit fixed point; each pass rounds and clips to 0..255.
-//!   Bit-exact with Pillow.
+//!   Bit-exact with Pillow. [`resize_pil_lanczos_u8`] is the same machinery with Pillow's
+//!   `LANCZOS` filter (the release brings a generated season back to the source size with it).
 //! - [`resize_antialias_bilinear`]: torch `F.interpolate(mode="bilinear", antialias=True,
 //!   align_corners=False)` on f32 (DINOv3 processor). Weights in f32 with torch's mix of f32 and
 //!   f64 intermediates; sums in f32 with fused multiply-adds, as torch's AVX2/AVX-512 CPU kernel
 //!   is compiled. Bit-exact with torch 2.4 on such a CPU (without the fusion: ≤ 2e-7 off).
 //!
-//! The weights of both come from one routine, [`triangle_weights`], generic over the precision the
-//! reference uses, so the two cannot drift apart.
+//! The weights of all come from one routine, [`filter_weights`], generic over the precision the
+//! reference uses, so they cannot drift apart.
 
 use rayon::prelude::*;
 
@@ -24,39 +25,98 @@ use crate::{Image, RasterError, Result};
 /// Errors on an empty input or output size and on a sample that is not an integer in 0..=255
 /// (convert and clip first: PIL would have had a `uint8` array).
 pub fn resize_pil_bilinear_u8(image: &Image, width: usize, height: usize) -> Result<Image> {
-    check_sizes(image, width, height, "resize_pil_bilinear_u8")?;
+    resize_pil_u8(image, width, height, PilFilter::Bilinear)
+}
+
+/// [`resize_pil_bilinear_u8`] with Pillow's `Image.LANCZOS` filter (windowed sinc, support 3
+/// widened by the down-scale factor; negative lobes, so each pass clips to 0..255). Bit-exact
+/// with Pillow ≤ 12, which always resamples width first (Pillow 13 goes height first when it
+/// widens and shortens an image; the clipping between passes makes the order matter).
+pub fn resize_pil_lanczos_u8(image: &Image, width: usize, height: usize) -> Result<Image> {
+    resize_pil_u8(image, width, height, PilFilter::Lanczos)
+}
+
+/// The Pillow filters the references resize with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PilFilter {
+    Bilinear,
+    Lanczos,
+}
+
+impl PilFilter {
+    fn weights(self, in_size: usize, out_size: usize) -> AxisWeights<f64> {
+        match self {
+            PilFilter::Bilinear => triangle_weights(in_size, out_size),
+            PilFilter::Lanczos => filter_weights(in_size, out_size, 3.0, lanczos3),
+        }
+    }
+}
+
+/// Pillow's `lanczos_filter`: `sinc(x) · sinc(x/3)` on [−3, 3).
+fn lanczos3(x: f64) -> f64 {
+    let sinc = |x: f64| {
+        if x == 0.0 {
+            1.0
+        } else {
+            let px = x * std::f64::consts::PI;
+            px.sin() / px
+        }
+    };
+    if (-3.0..3.0).contains(&x) {
+        sinc(x) * sinc(x / 3.0)
+    } else {
+        0.0
+    }
+}
+
+/// Pillow's 8-bit `ImagingResample`: a pass per axis whose size changes (width first), each in
+/// fixed point, rounded and clipped to 0..255.
+fn resize_pil_u8(image: &Image, width: usize, height: usize, filter: PilFilter) -> Result<Image> {
+    let what = match filter {
+        PilFilter::Bilinear => "resize_pil_bilinear_u8",
+        PilFilter::Lanczos => "resize_pil_lanczos_u8",
+    };
+    check_sizes(image, width, height, what)?;
     if let Some(bad) = image
         .data()
         .iter()
         .find(|v| !(v.fract() == 0.0 && (0.0..=255.0).contains(*v)))
     {
         return Err(RasterError::Shape(format!(
-            "resize_pil_bilinear_u8: sample {bad} is not an 8-bit value (integers 0..=255 expected)"
+            "{what}: sample {bad} is not an 8-bit value (integers 0..=255 expected)"
         )));
     }
     let c = image.channels();
+    let in_row = image.width() * c;
     let u8_data: Vec<u8> = image.data().iter().map(|&v| v as u8).collect();
-    let horizontal = FixedWeights::new(&triangle_weights::<f64>(image.width(), width));
-    let vertical = FixedWeights::new(&triangle_weights::<f64>(image.height(), height));
 
     // Width pass: every input row to `width` pixels.
-    let mut tmp = vec![0u8; width * image.height() * c];
-    let in_row = image.width() * c;
-    tmp.par_chunks_mut(width * c)
-        .zip(u8_data.par_chunks(in_row))
-        .for_each(|(out, src)| {
-            for (x, px) in out.chunks_exact_mut(c).enumerate() {
-                let (start, taps) = horizontal.taps(x);
-                for (ch, o) in px.iter_mut().enumerate() {
-                    let acc = taps.iter().enumerate().fold(FIXED_HALF, |acc, (j, &k)| {
-                        acc + src[(start + j) * c + ch] as i32 * k
-                    });
-                    *o = clip8(acc);
+    let tmp = if width == image.width() {
+        u8_data
+    } else {
+        let horizontal = FixedWeights::new(&filter.weights(image.width(), width));
+        let mut tmp = vec![0u8; width * image.height() * c];
+        tmp.par_chunks_mut(width * c)
+            .zip(u8_data.par_chunks(in_row))
+            .for_each(|(out, src)| {
+                for (x, px) in out.chunks_exact_mut(c).enumerate() {
+                    let (start, taps) = horizontal.taps(x);
+                    for (ch, o) in px.iter_mut().enumerate() {
+                        let acc = taps.iter().enumerate().fold(FIXED_HALF, |acc, (j, &k)| {
+                            acc + src[(start + j) * c + ch] as i32 * k
+                        });
+                        *o = clip8(acc);
+                    }
                 }
-            }
-        });
+            });
+        tmp
+    };
+    if height == image.height() {
+        return Image::new(width, height, c, tmp.into_iter().map(f32::from).collect());
+    }
 
     // Height pass: output row y mixes rows of the width-resized image.
+    let vertical = FixedWeights::new(&filter.weights(image.height(), height));
     let row = width * c;
     let mut out = vec![0f32; row * height];
     out.par_chunks_mut(row).enumerate().for_each(|(y, dst)| {
@@ -236,16 +296,35 @@ impl FilterFloat for f64 {
     }
 }
 
-/// Normalised triangle-filter weights for resizing an axis of `in_size` samples to `out_size`
-/// (align_corners=False geometry), shared by Pillow (`precompute_coeffs`, T = f64) and torch
-/// (`_compute_indices_min_size_weights_aa`, T = f32):
-/// scale = in/out, support = max(scale, 1), centre = (i + 0.5)·scale,
-/// taps j ∈ [trunc(centre − support + 0.5), trunc(centre + support + 0.5)) ∩ [0, in),
-/// weight = max(0, 1 − |(j − centre + 0.5) / max(scale, 1)|), divided by the taps' sum.
+/// Normalised triangle-filter weights ([`filter_weights`] with support 1), the bilinear filter of
+/// Pillow (T = f64) and of torch's antialiased interpolation (T = f32).
 fn triangle_weights<T: FilterFloat>(in_size: usize, out_size: usize) -> AxisWeights<T> {
+    filter_weights(in_size, out_size, T::ONE, |arg| {
+        let a = if arg < T::ZERO { T::ZERO - arg } else { arg };
+        if a < T::ONE {
+            T::ONE - a
+        } else {
+            T::ZERO
+        }
+    })
+}
+
+/// Normalised weights of a separable filter for resizing an axis of `in_size` samples to
+/// `out_size` (align_corners=False geometry), as Pillow's `precompute_coeffs` (T = f64) and
+/// torch's `_compute_indices_min_size_weights_aa` (T = f32) compute them:
+/// scale = in/out, fs = max(scale, 1), support = `filter_support`·fs, centre = (i + 0.5)·scale,
+/// taps j ∈ [trunc(centre − support + 0.5), trunc(centre + support + 0.5)) ∩ [0, in),
+/// weight = filter((j − centre + 0.5) / fs), divided by the taps' sum.
+fn filter_weights<T: FilterFloat>(
+    in_size: usize,
+    out_size: usize,
+    filter_support: T,
+    filter: impl Fn(T) -> T,
+) -> AxisWeights<T> {
     let scale = T::from_f64(in_size as f64) / T::from_f64(out_size as f64);
-    let support = if scale >= T::ONE { scale } else { T::ONE };
-    let inv_scale = T::from_f64(1.0 / support.to_f64());
+    let filter_scale = if scale >= T::ONE { scale } else { T::ONE };
+    let support = filter_support * filter_scale;
+    let inv_scale = T::from_f64(1.0 / filter_scale.to_f64());
     let mut start = Vec::with_capacity(out_size);
     let mut offset = Vec::with_capacity(out_size + 1);
     let mut weights = Vec::new();
@@ -259,9 +338,7 @@ fn triangle_weights<T: FilterFloat>(in_size: usize, out_size: usize) -> AxisWeig
         let mut total = T::ZERO;
         for j in lo..hi {
             let d = T::from_f64(j as f64) - centre;
-            let arg = T::from_f64((d.to_f64() + 0.5) * inv_scale.to_f64());
-            let a = if arg < T::ZERO { T::ZERO - arg } else { arg };
-            let w = if a < T::ONE { T::ONE - a } else { T::ZERO };
+            let w = filter(T::from_f64((d.to_f64() + 0.5) * inv_scale.to_f64()));
             weights.push(w);
             total = total + w;
         }
@@ -357,5 +434,52 @@ mod tests {
         let img = ramp(3, 3, 1);
         assert!(resize_antialias_bilinear(&img, 0, 3).is_err());
         assert!(resize_pil_bilinear_u8(&img, 3, 0).is_err());
+    }
+
+    /// Pillow 11.3 and 12.1 `Image.resize(size, Image.LANCZOS)` of a 7×5 RGB image with a sharp
+    /// edge (ringing clipped to 0 and 255): up in x and down in y, down in x and up in y, one
+    /// axis. (Pillow 13 runs the vertical pass first when it widens and shortens an image, which
+    /// changes the first case by up to 12 DN.)
+    #[test]
+    fn lanczos_matches_pillow() {
+        let image = Image::new(
+            7,
+            5,
+            3,
+            (0..5)
+                .flat_map(|y| {
+                    (0..7).flat_map(move |x| {
+                        [
+                            ((x * 37 + y * 91) % 256) as f32,
+                            if x >= 3 { 255.0 } else { 0.0 },
+                            ((x * x * 11 + y * 29) % 256) as f32,
+                        ]
+                    })
+                })
+                .collect(),
+        )
+        .unwrap();
+        #[rustfmt::skip]
+        let cases: [(usize, usize, &[u8]); 3] = [
+            (11, 3, &[42, 0, 9, 55, 5, 11, 84, 0, 22, 109, 0, 44, 129, 86, 65, 154, 255, 108, 189,
+                255, 197, 167, 247, 160, 108, 255, 34, 118, 255, 81, 148, 255, 162, 122, 0, 58, 155,
+                5, 60, 160, 0, 71, 80, 0, 90, 56, 86, 120, 90, 255, 157, 136, 255, 194, 137, 247,
+                148, 112, 255, 75, 129, 255, 151, 153, 255, 232, 62, 0, 107, 77, 5, 109, 106, 0,
+                120, 126, 0, 132, 165, 86, 191, 176, 255, 206, 98, 255, 68, 70, 247, 19, 109, 255,
+                116, 147, 255, 123, 157, 255, 99]),
+            (3, 9, &[15, 0, 3, 94, 181, 97, 214, 255, 100, 44, 0, 11, 149, 181, 104, 162, 255, 107,
+                102, 0, 30, 204, 181, 123, 87, 255, 126, 166, 0, 47, 133, 181, 151, 64, 255, 150,
+                164, 0, 63, 37, 181, 157, 123, 255, 160, 83, 0, 87, 66, 181, 127, 209, 255, 156, 44,
+                0, 114, 138, 181, 112, 201, 255, 119, 110, 0, 131, 148, 181, 139, 88, 255, 74, 166,
+                0, 136, 143, 181, 162, 8, 255, 50]),
+            (7, 2, &[78, 0, 23, 115, 0, 34, 87, 0, 67, 124, 255, 122, 176, 255, 204, 108, 255, 42,
+                145, 255, 178, 95, 0, 93, 132, 0, 104, 104, 0, 137, 141, 255, 192, 87, 255, 73, 114,
+                255, 112, 151, 255, 142]),
+        ];
+        for (w, h, want) in cases {
+            let got = resize_pil_lanczos_u8(&image, w, h).unwrap();
+            let got: Vec<u8> = got.data().iter().map(|&v| v as u8).collect();
+            assert_eq!(got, want, "{w}x{h}");
+        }
     }
 }

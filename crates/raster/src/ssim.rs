@@ -3,6 +3,8 @@
 //! * [`ssim_gaussian`]: the standard score, identical in definition to scikit-image's
 //!   `structural_similarity(gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
 //!   data_range=L)`, used to rank training pairs by photometric similarity (`S_SSIM`);
+//! * [`ssim_uniform_map`]: scikit-image's defaults (7×7 uniform window, sample covariances),
+//!   which is what the released pair-scoring script calls, so `curate` reproduces its numbers;
 //! * [`ssim_box3`]: the per-pixel 3×3 box-filter SSIM of Monodepth, used by the photometric
 //!   loss `α (1 − SSIM)/2 + (1 − α) |I − Î|`.
 //!
@@ -17,6 +19,8 @@ use crate::{Image, Mask, RasterError, Result};
 pub const GAUSSIAN_SIGMA: f64 = 1.5;
 /// Window radius: scikit-image uses `truncate = 3.5`, i.e. `int(3.5 σ + 0.5) = 5`, an 11×11 window.
 pub const GAUSSIAN_RADIUS: usize = 5;
+/// Side of scikit-image's default uniform window (`win_size = 7`).
+pub const UNIFORM_WINDOW: usize = 7;
 /// SSIM stabilising constants `C1 = (K1 L)²`, `C2 = (K2 L)²` for a data range `L`.
 pub const K1: f64 = 0.01;
 pub const K2: f64 = 0.03;
@@ -68,30 +72,38 @@ fn check_pair(a: &Image, b: &Image, what: &str) -> Result<()> {
 }
 
 /// `SSIM = (2 μa μb + C1)(2 σab + C2) / ((μa² + μb² + C1)(σa² + σb² + C2))` from the windowed
-/// moments `[E a, E b, E a², E b², E ab]`.
+/// moments `[E a, E b, E a², E b², E ab]`; `cov_norm` scales the (co)variances (`N/(N−1)` for
+/// sample covariances, 1 for population ones).
 #[inline]
-fn ssim_from_moments(m: &[f64; 5], c1: f64, c2: f64) -> f64 {
+fn ssim_from_moments(m: &[f64; 5], c1: f64, c2: f64, cov_norm: f64) -> f64 {
     let [ma, mb, maa, mbb, mab] = *m;
-    let va = maa - ma * ma;
-    let vb = mbb - mb * mb;
-    let cov = mab - ma * mb;
+    let va = cov_norm * (maa - ma * ma);
+    let vb = cov_norm * (mbb - mb * mb);
+    let cov = cov_norm * (mab - ma * mb);
     ((2.0 * ma * mb + c1) * (2.0 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
 }
 
-/// Gaussian-window SSIM of every channel, planar: `maps[ch][y * W + x]`.
-fn gaussian_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>> {
-    check_pair(a, b, "ssim_gaussian")?;
+/// SSIM of every channel with a separable window (`kernel` ⊗ `kernel`, centred, scipy
+/// `reflect` borders), planar: `maps[ch][y * W + x]`.
+fn windowed_maps(
+    a: &Image,
+    b: &Image,
+    kernel: &[f64],
+    data_range: f32,
+    cov_norm: f64,
+    what: &str,
+) -> Result<Vec<Vec<f64>>> {
+    check_pair(a, b, what)?;
     if !(data_range.is_finite() && data_range > 0.0) {
         return Err(RasterError::Shape(format!(
-            "ssim_gaussian: data_range must be positive, got {data_range}"
+            "{what}: data_range must be positive, got {data_range}"
         )));
     }
     let (w, h) = a.size();
     let c = a.channels();
     let l = data_range as f64;
     let (c1, c2) = ((K1 * l).powi(2), (K2 * l).powi(2));
-    let k = gaussian_kernel();
-    let r = GAUSSIAN_RADIUS as isize;
+    let r = (kernel.len() / 2) as isize;
     if w == 0 || h == 0 {
         return Ok(vec![Vec::new(); c]);
     }
@@ -103,7 +115,7 @@ fn gaussian_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>>
                 let (ra, rb) = (a.row(y), b.row(y));
                 for (x, o) in out.iter_mut().enumerate() {
                     let mut acc = [0.0f64; 5];
-                    for (j, &kw) in k.iter().enumerate() {
+                    for (j, &kw) in kernel.iter().enumerate() {
                         let xx = reflect_scipy(x as isize + j as isize - r, w);
                         let va = ra[xx * c + ch] as f64;
                         let vb = rb[xx * c + ch] as f64;
@@ -122,7 +134,7 @@ fn gaussian_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>>
                 || vec![[0.0f64; 5]; w],
                 |acc, (y, out)| {
                     acc.iter_mut().for_each(|m| *m = [0.0; 5]);
-                    for (i, &kw) in k.iter().enumerate() {
+                    for (i, &kw) in kernel.iter().enumerate() {
                         let yy = reflect_scipy(y as isize + i as isize - r, h);
                         for (m, src) in acc.iter_mut().zip(&horiz[yy * w..(yy + 1) * w]) {
                             for (mq, sq) in m.iter_mut().zip(src) {
@@ -131,7 +143,7 @@ fn gaussian_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>>
                         }
                     }
                     for (o, m) in out.iter_mut().zip(acc.iter()) {
-                        *o = ssim_from_moments(m, c1, c2);
+                        *o = ssim_from_moments(m, c1, c2, cov_norm);
                     }
                 },
             );
@@ -139,6 +151,43 @@ fn gaussian_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>>
         })
         .collect();
     Ok(maps)
+}
+
+/// Gaussian-window SSIM of every channel (population covariances), planar.
+fn gaussian_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>> {
+    windowed_maps(a, b, &gaussian_kernel(), data_range, 1.0, "ssim_gaussian")
+}
+
+/// Planar per-channel maps → an interleaved image of the inputs' shape.
+fn interleave(maps: &[Vec<f64>], w: usize, h: usize) -> Result<Image> {
+    let c = maps.len();
+    let mut data = vec![0.0f32; w * h * c];
+    for (ch, m) in maps.iter().enumerate() {
+        for (i, &v) in m.iter().enumerate() {
+            data[i * c + ch] = v as f32;
+        }
+    }
+    Image::new(w, h, c, data)
+}
+
+/// Mean of planar maps over the pixels where `mask` is true and every channel; `None` for an
+/// empty mask.
+fn masked_mean_of_maps(maps: &[Vec<f64>], mask: &Mask) -> Option<f64> {
+    let n = mask.count();
+    if n == 0 || maps.is_empty() {
+        return None;
+    }
+    let s: f64 = maps
+        .iter()
+        .map(|m| {
+            m.iter()
+                .zip(mask.data())
+                .filter(|(_, &v)| v)
+                .map(|(s, _)| s)
+                .sum::<f64>()
+        })
+        .sum();
+    Some(s / (n * maps.len()) as f64)
 }
 
 /// Mean SSIM with an 11×11 Gaussian window (σ = 1.5), `C1 = (0.01 L)²`, `C2 = (0.03 L)²` with
@@ -172,15 +221,7 @@ pub fn ssim_gaussian(a: &Image, b: &Image, data_range: f32) -> Result<f64> {
 /// (border pixels use reflected windows, like scikit-image's `full=True` map).
 pub fn ssim_gaussian_map(a: &Image, b: &Image, data_range: f32) -> Result<Image> {
     let maps = gaussian_maps(a, b, data_range)?;
-    let (w, h) = a.size();
-    let c = a.channels();
-    let mut data = vec![0.0f32; w * h * c];
-    for (ch, m) in maps.iter().enumerate() {
-        for (i, &v) in m.iter().enumerate() {
-            data[i * c + ch] = v as f32;
-        }
-    }
-    Image::new(w, h, c, data)
+    interleave(&maps, a.width(), a.height())
 }
 
 /// Mean of the Gaussian SSIM map over the pixels where `mask` is true (all channels), for
@@ -193,22 +234,42 @@ pub fn ssim_gaussian_masked(
     data_range: f32,
 ) -> Result<Option<f64>> {
     a.check_mask(mask, "ssim_gaussian_masked")?;
-    let maps = gaussian_maps(a, b, data_range)?;
-    let n = mask.count();
-    if n == 0 {
-        return Ok(None);
+    Ok(masked_mean_of_maps(&gaussian_maps(a, b, data_range)?, mask))
+}
+
+/// scikit-image's `structural_similarity` with its defaults, as the release's pair scoring
+/// calls it (`full=True, channel_axis=-1, data_range=L`): a 7×7 **uniform** window
+/// (`uniform_filter`, `mode='reflect'`), sample covariances (`N/(N−1)`, N = 49), each channel
+/// on its own. Per-pixel, per-channel map, same shape as the inputs, which must be at least
+/// 7×7 (scikit-image refuses smaller ones).
+pub fn ssim_uniform_map(a: &Image, b: &Image, data_range: f32) -> Result<Image> {
+    let maps = uniform_maps(a, b, data_range)?;
+    interleave(&maps, a.width(), a.height())
+}
+
+/// Mean of [`ssim_uniform_map`] over the pixels of `mask` and every channel (the release's
+/// `reduce_metric_map`); `Ok(None)` for an empty mask.
+pub fn ssim_uniform_masked(
+    a: &Image,
+    b: &Image,
+    mask: &Mask,
+    data_range: f32,
+) -> Result<Option<f64>> {
+    a.check_mask(mask, "ssim_uniform_masked")?;
+    Ok(masked_mean_of_maps(&uniform_maps(a, b, data_range)?, mask))
+}
+
+fn uniform_maps(a: &Image, b: &Image, data_range: f32) -> Result<Vec<Vec<f64>>> {
+    let (w, h) = a.size();
+    let win = UNIFORM_WINDOW;
+    if w < win || h < win {
+        return Err(RasterError::Shape(format!(
+            "ssim_uniform: a {w}x{h} image is smaller than the {win}x{win} window"
+        )));
     }
-    let s: f64 = maps
-        .iter()
-        .map(|m| {
-            m.iter()
-                .zip(mask.data())
-                .filter(|(_, &v)| v)
-                .map(|(s, _)| s)
-                .sum::<f64>()
-        })
-        .sum();
-    Ok(Some(s / (n * maps.len()) as f64))
+    let n = (win * win) as f64;
+    let kernel = [1.0 / win as f64; UNIFORM_WINDOW];
+    windowed_maps(a, b, &kernel, data_range, n / (n - 1.0), "ssim_uniform")
 }
 
 /// Monodepth's per-pixel SSIM: 3×3 average pooling of the means, variances and covariance after
@@ -255,7 +316,7 @@ pub fn ssim_box3(a: &Image, b: &Image) -> Result<Image> {
                         }
                     }
                     let m = m.map(|v| v / 9.0);
-                    out[x * c + ch] = ssim_from_moments(&m, c1, c2) as f32;
+                    out[x * c + ch] = ssim_from_moments(&m, c1, c2, 1.0) as f32;
                 }
             }
         },
@@ -467,5 +528,66 @@ mod tests {
         let m = ssim_box3(&a, &b).unwrap();
         assert!(m.get(1, 1, 0).is_nan());
         assert!(!m.get(2, 2, 0).is_nan());
+    }
+
+    /// SSIM at one pixel straight from the definition: 7×7 reflected window, sample
+    /// covariances. Shares nothing with the separable implementation.
+    fn naive_uniform_at(a: &Image, b: &Image, x: usize, y: usize, l: f64) -> f64 {
+        let (w, h) = a.size();
+        let mut va = Vec::new();
+        let mut vb = Vec::new();
+        for dy in -3..=3isize {
+            for dx in -3..=3isize {
+                let (xx, yy) = (
+                    reflect_scipy(x as isize + dx, w),
+                    reflect_scipy(y as isize + dy, h),
+                );
+                va.push(a.get(xx, yy, 0) as f64);
+                vb.push(b.get(xx, yy, 0) as f64);
+            }
+        }
+        let n = va.len() as f64;
+        let ma = va.iter().sum::<f64>() / n;
+        let mb = vb.iter().sum::<f64>() / n;
+        let sa = va.iter().map(|v| (v - ma).powi(2)).sum::<f64>() / (n - 1.0);
+        let sb = vb.iter().map(|v| (v - mb).powi(2)).sum::<f64>() / (n - 1.0);
+        let sab = va
+            .iter()
+            .zip(&vb)
+            .map(|(p, q)| (p - ma) * (q - mb))
+            .sum::<f64>()
+            / (n - 1.0);
+        let (c1, c2) = ((0.01 * l).powi(2), (0.03 * l).powi(2));
+        ((2.0 * ma * mb + c1) * (2.0 * sab + c2)) / ((ma * ma + mb * mb + c1) * (sa + sb + c2))
+    }
+
+    #[test]
+    fn uniform_matches_the_definition_everywhere_including_borders() {
+        let a = Image::from_fn(11, 9, |x, y| ((x * 37 + y * 91) % 255) as f32);
+        let b = Image::from_fn(11, 9, |x, y| ((x * 13 + y * 7 + 40) % 200) as f32);
+        let map = ssim_uniform_map(&a, &b, 255.0).unwrap();
+        for y in 0..9 {
+            for x in 0..11 {
+                let want = naive_uniform_at(&a, &b, x, y, 255.0);
+                assert!((map.get(x, y, 0) as f64 - want).abs() < 1e-5, "({x},{y})");
+            }
+        }
+        let same = ssim_uniform_map(&a, &a, 255.0).unwrap();
+        assert!(same.data().iter().all(|&v| (v - 1.0).abs() < 1e-6));
+        let mask = Mask::from_fn(11, 9, |x, _| x < 3);
+        let m = ssim_uniform_masked(&a, &b, &mask, 255.0).unwrap().unwrap();
+        let want: f64 = (0..9)
+            .flat_map(|y| (0..3).map(move |x| (x, y)))
+            .map(|(x, y)| naive_uniform_at(&a, &b, x, y, 255.0))
+            .sum::<f64>()
+            / 27.0;
+        assert!((m - want).abs() < 1e-5);
+        assert!(
+            ssim_uniform_masked(&a, &b, &Mask::filled(11, 9, false), 255.0)
+                .unwrap()
+                .is_none()
+        );
+        let small = Image::filled(6, 9, 1, 0.0);
+        assert!(ssim_uniform_map(&small, &small, 255.0).is_err());
     }
 }

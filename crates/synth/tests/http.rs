@@ -176,15 +176,10 @@ fn serve(stream: TcpStream, reply: &Reply, log: &Mutex<Vec<Request>>) -> std::io
 // ---------------------------------------------------------------- helpers
 
 fn png_bytes(w: u32, h: u32, rgb: [u8; 3]) -> Vec<u8> {
-    let mut out = Vec::new();
-    let mut enc = png::Encoder::new(&mut out, w, h);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut writer = enc.write_header().unwrap();
-    let data: Vec<u8> = (0..w * h).flat_map(|_| rgb).collect();
-    writer.write_image_data(&data).unwrap();
-    writer.finish().unwrap();
-    out
+    let (w, h) = (w as usize, h as usize);
+    let data = (0..w * h).flat_map(|_| rgb.map(f32::from)).collect();
+    let image = Image::new(w, h, 3, data).unwrap();
+    raster::formats::encode_png(&image, raster::formats::PngDepth::Eight).unwrap()
 }
 
 fn image_answer(w: u32, h: u32, rgb: [u8; 3]) -> Vec<u8> {

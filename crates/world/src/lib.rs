@@ -108,6 +108,15 @@ impl WorldParams {
         (self.left.slope - self.right.slope) * z + (self.left.offset - self.right.offset)
     }
 
+    /// Integer disparity search range guaranteed to contain every true disparity, derived from the
+    /// cameras and the scene's altitude range (the way a satellite pipeline should bound it); it
+    /// does not depend on the seed, so it is known before rendering.
+    pub fn disparity_range(&self) -> (i32, i32) {
+        let scene_max = self.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
+        let (a, b) = (self.disparity_at(-1.0), self.disparity_at(scene_max));
+        (a.min(b).floor() as i32, a.max(b).ceil() as i32)
+    }
+
     fn check(&self) -> Result<(), String> {
         if self.width < 8 || self.height < 8 || self.width > 16384 || self.height > 16384 {
             return Err(format!(
@@ -162,15 +171,10 @@ pub struct World {
 }
 
 impl World {
-    /// Integer disparity search range guaranteed to contain every true disparity, derived from the
-    /// cameras and the scene's altitude range (the way a satellite pipeline should bound it).
+    /// Integer disparity search range guaranteed to contain every true disparity
+    /// ([`WorldParams::disparity_range`]).
     pub fn disparity_range(&self) -> (i32, i32) {
-        let scene_max = self.params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
-        let (a, b) = (
-            self.params.disparity_at(-1.0),
-            self.params.disparity_at(scene_max),
-        );
-        (a.min(b).floor() as i32, a.max(b).ceil() as i32)
+        self.params.disparity_range()
     }
 }
 

@@ -30,19 +30,7 @@ pub fn to_rgb_u8(image: &Image) -> Result<Image, SegformerError> {
              (integers 0..=255); convert the image first"
         )));
     }
-    let c = image.channels();
-    if c == 3 {
-        return Ok(image.clone());
-    }
-    let data: Vec<f32> = image
-        .data()
-        .chunks_exact(c)
-        .flat_map(|p| match c {
-            1 | 2 => [p[0]; 3],
-            _ => [p[0], p[1], p[2]],
-        })
-        .collect();
-    Ok(Image::new(image.width(), image.height(), 3, data)?)
+    Ok(image.to_rgb())
 }
 
 /// Network input 1×3×H×W from an 8-bit RGB image (no resize): `((x / 255) − mean) / std` in f32.

@@ -4,37 +4,11 @@
 //! the valid-pixel mask, the colour distance statistics and the SSIM.
 
 use anyhow::{bail, Result};
+use raster::ssim::ssim_uniform_masked;
 use raster::{Image, Mask};
 
-use super::ssim::ssim_uniform_masked;
-
 /// The release reads images with values 0–255 and scores SSIM with this data range.
-pub const DATA_RANGE: f64 = 255.0;
-
-/// A pair brought to the release's shape: 3 channels (grey repeated, extra channels dropped).
-pub fn to_rgb(image: &Image) -> Result<Image> {
-    let (w, h) = image.size();
-    match image.channels() {
-        3 => Ok(image.clone()),
-        1 | 2 => {
-            let c = image.channels();
-            let data = image
-                .data()
-                .chunks_exact(c)
-                .flat_map(|p| [p[0]; 3])
-                .collect();
-            Ok(Image::new(w, h, 3, data)?)
-        }
-        c => {
-            let data = image
-                .data()
-                .chunks_exact(c)
-                .flat_map(|p| [p[0], p[1], p[2]])
-                .collect();
-            Ok(Image::new(w, h, 3, data)?)
-        }
-    }
-}
+pub const DATA_RANGE: f32 = 255.0;
 
 /// The inputs of every score of one pair: the left image, its reconstruction from the right
 /// image and the pixels where the reconstruction is meaningful.
@@ -64,8 +38,8 @@ impl WarpedPair {
                 left.height()
             );
         }
-        let left = to_rgb(left)?;
-        let right = to_rgb(right)?;
+        let left = left.to_rgb();
+        let right = right.to_rgb();
         // The release's warp: grid_sample(bilinear, zeros, align_corners=True) along x.
         let (left_hat, inside) =
             raster::geometry::warp_by_disparity_grid_sample(&right, disparity)?;

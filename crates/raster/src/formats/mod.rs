@@ -21,7 +21,7 @@ use crate::{Image, RasterError, Result};
 pub use self::npy::{read_npy, write_npy};
 pub use self::npz::{read_homographies, write_homographies};
 pub use self::pfm::{read_pfm, write_pfm};
-pub use self::png::{read_png, write_png, PngDepth};
+pub use self::png::{decode_png, encode_png, read_png, write_png, PngDepth};
 pub use self::tiff::{read_tiff, write_geotiff, GeoRaster, GeoReference, GeoTiffMeta, RpcTag};
 
 /// The extensions [`read_image`] and [`write_image`] understand.

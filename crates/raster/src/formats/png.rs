@@ -1,8 +1,7 @@
 //! PNG images: 8- or 16-bit grey, grey+alpha, RGB or RGBA (palettes and low bit depths expanded),
 //! values kept in their native units (0–255 or 0–65535).
 
-use std::fs::File;
-use std::io::BufReader;
+use std::io::{Cursor, Write};
 use std::path::Path;
 
 use png::{BitDepth, ColorType, Decoder, Encoder, Transformations};
@@ -22,12 +21,17 @@ pub enum PngDepth {
 /// Reads a PNG (first frame of an APNG).
 pub fn read_png(path: impl AsRef<Path>) -> Result<Image> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|e| RasterError::io(path, e))?;
-    let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
-    let err = |m: String| RasterError::format(path, m);
-    no_panic(path, "PNG", || {
+    let bytes = std::fs::read(path).map_err(|e| RasterError::io(path, e))?;
+    decode_png(&bytes, path).map(|(image, _)| image)
+}
+
+/// Decodes a PNG held in memory (an HTTP answer, an archive member), first frame of an APNG;
+/// `source` names it in errors. Returns the image in its native units and the bit depth.
+pub fn decode_png(bytes: &[u8], source: &Path) -> Result<(Image, PngDepth)> {
+    let err = |m: String| RasterError::format(source, m);
+    no_panic(source, "PNG", || {
         let mut decoder = Decoder::new_with_limits(
-            BufReader::new(file),
+            Cursor::new(bytes),
             png::Limits {
                 bytes: usize::MAX / 2,
             },
@@ -40,15 +44,17 @@ pub fn read_png(path: impl AsRef<Path>) -> Result<Image> {
         let (w, h) = reader.info().size();
         let c = color.samples() as u64;
         // Deflate expands at most ~1032:1: a header promising more pixels than that is corrupt.
-        let max = file_len.saturating_mul(1100).saturating_add(1 << 20);
-        checked_samples(path, w as u64, h as u64, c, max)?;
+        let max = (bytes.len() as u64)
+            .saturating_mul(1100)
+            .saturating_add(1 << 20);
+        checked_samples(source, w as u64, h as u64, c, max)?;
         let mut buf = vec![0u8; reader.output_buffer_size()];
         let info = reader
             .next_frame(&mut buf)
             .map_err(|e| err(format!("corrupt PNG data: {e}")))?;
         let bytes = &buf[..info.buffer_size()];
         let n = (w as usize) * (h as usize) * c as usize;
-        let mut data = alloc_samples(path, n, 0.0)?;
+        let mut data = alloc_samples(source, n, 0.0)?;
         let line = info.line_size;
         let row = w as usize * c as usize;
         for y in 0..h as usize {
@@ -68,7 +74,13 @@ pub fn read_png(path: impl AsRef<Path>) -> Result<Image> {
                 other => return Err(err(format!("unexpected PNG bit depth {other:?}"))),
             }
         }
-        Image::new(w as usize, h as usize, c as usize, data).map_err(|e| err(e.to_string()))
+        let depth = match depth {
+            BitDepth::Sixteen => PngDepth::Sixteen,
+            _ => PngDepth::Eight,
+        };
+        let image =
+            Image::new(w as usize, h as usize, c as usize, data).map_err(|e| err(e.to_string()))?;
+        Ok((image, depth))
     })
 }
 
@@ -76,6 +88,15 @@ pub fn read_png(path: impl AsRef<Path>) -> Result<Image> {
 /// and clamped to the depth's range, NaN written as 0.
 pub fn write_png(path: impl AsRef<Path>, image: &Image, depth: PngDepth) -> Result<()> {
     let path = path.as_ref();
+    let bytes = encode_png(image, depth).map_err(|e| match e {
+        RasterError::Shape(m) => RasterError::Shape(format!("{}: {m}", path.display())),
+        other => other,
+    })?;
+    write_atomically(path, |file| file.write_all(&bytes))
+}
+
+/// The PNG file of [`write_png`], in memory.
+pub fn encode_png(image: &Image, depth: PngDepth) -> Result<Vec<u8>> {
     let color = match image.channels() {
         1 => ColorType::Grayscale,
         2 => ColorType::GrayscaleAlpha,
@@ -83,19 +104,15 @@ pub fn write_png(path: impl AsRef<Path>, image: &Image, depth: PngDepth) -> Resu
         4 => ColorType::Rgba,
         c => {
             return Err(RasterError::Shape(format!(
-                "{}: PNG stores 1 to 4 channels, the image has {c}",
-                path.display()
+                "PNG stores 1 to 4 channels, the image has {c}"
             )))
         }
     };
     let (w, h) = (u32::try_from(image.width()), u32::try_from(image.height()));
     let (Ok(w), Ok(h)) = (w, h) else {
-        return Err(RasterError::Shape(format!(
-            "{}: image too large for PNG",
-            path.display()
-        )));
+        return Err(RasterError::Shape("image too large for PNG".into()));
     };
-    let bytes: Vec<u8> = match depth {
+    let samples: Vec<u8> = match depth {
         // `as` saturates and maps NaN to 0.
         PngDepth::Eight => image.data().iter().map(|v| v.round() as u8).collect(),
         PngDepth::Sixteen => image
@@ -104,16 +121,18 @@ pub fn write_png(path: impl AsRef<Path>, image: &Image, depth: PngDepth) -> Resu
             .flat_map(|v| (v.round() as u16).to_be_bytes())
             .collect(),
     };
-    write_atomically(path, |file| {
-        let mut enc = Encoder::new(file, w, h);
-        enc.set_color(color);
-        enc.set_depth(match depth {
-            PngDepth::Eight => BitDepth::Eight,
-            PngDepth::Sixteen => BitDepth::Sixteen,
-        });
+    let mut out = Vec::new();
+    let mut enc = Encoder::new(&mut out, w, h);
+    enc.set_color(color);
+    enc.set_depth(match depth {
+        PngDepth::Eight => BitDepth::Eight,
+        PngDepth::Sixteen => BitDepth::Sixteen,
+    });
+    let encoded = (|| {
         let mut writer = enc.write_header()?;
-        writer.write_image_data(&bytes)?;
-        writer.finish()?;
-        Ok(())
-    })
+        writer.write_image_data(&samples)?;
+        writer.finish()
+    })();
+    encoded.map_err(|e| RasterError::Shape(format!("PNG encoding failed: {e}")))?;
+    Ok(out)
 }

@@ -274,7 +274,7 @@ impl GeminiGenerator {
     ) -> Result<Generated, SynthError> {
         source.validate()?;
         let (w, h) = source.image.size();
-        let input = codec::encode_png(source.image)
+        let input = codec::encode_rgb_png(source.image)
             .map_err(|e| SynthError::Input(format!("{}: cannot encode as PNG: {e}", source.id)))?;
         let prompt = self.config.prompts.prompt(season);
         let generation = self.generation_config(w, h);
@@ -293,7 +293,7 @@ impl GeminiGenerator {
                     Ok(image) => {
                         self.counters.cache_hits.fetch_add(1, Ordering::Relaxed);
                         self.log(&format!("{label}: from cache {}", path.display()));
-                        return Ok(self.finish(image, (w, h), true, 0, &label));
+                        return self.finish(image, (w, h), true, 0, &label);
                     }
                     Err(e) => self.log(&format!(
                         "{label}: ignoring unreadable cache entry {}: {e}",
@@ -316,7 +316,7 @@ impl GeminiGenerator {
             self.counters.cache_writes.fetch_add(1, Ordering::Relaxed);
             self.log(&format!("{label}: cached as {}", path.display()));
         }
-        Ok(self.finish(image, (w, h), false, attempts, &label))
+        self.finish(image, (w, h), false, attempts, &label)
     }
 
     /// Resizes the returned image to the source size when needed.
@@ -327,7 +327,7 @@ impl GeminiGenerator {
         from_cache: bool,
         attempts: u32,
         label: &str,
-    ) -> Generated {
+    ) -> Result<Generated, SynthError> {
         let returned_size = image.size();
         let resized = returned_size != (w, h);
         let image = if resized {
@@ -335,18 +335,18 @@ impl GeminiGenerator {
                 "{label}: the model returned {}x{}, resized back to {w}x{h}",
                 returned_size.0, returned_size.1
             ));
-            codec::resize_lanczos3(&image, w, h)
+            raster::resize::resize_pil_lanczos_u8(&image, w, h)?
         } else {
             image
         };
         let image = clamp_to_dn(image);
-        Generated {
+        Ok(Generated {
             image,
             from_cache,
             attempts,
             returned_size,
             resized,
-        }
+        })
     }
 
     /// POSTs `body`, retrying transient failures; returns the 200 body and the attempt count.
