@@ -247,10 +247,8 @@ struct NetworkArgs {
     /// Overlap of consecutive strips, rows (blended linearly).
     #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP)]
     tile_overlap: usize,
-    /// Where the network runs: auto, cpu, wgpu or cuda (GPU backends need the build features
-    /// `wgpu` / `cuda`).
-    #[arg(long, default_value = "auto")]
-    device: String,
+    #[command(flatten)]
+    device: stages::DeviceArg,
 }
 
 impl NetworkArgs {
@@ -269,7 +267,7 @@ impl NetworkArgs {
         o.memory_budget = (self.max_memory * (1u64 << 30) as f64) as u64;
         o.tile_rows = self.tile;
         o.tile_overlap = self.tile_overlap;
-        o.device = self.device.clone();
+        o.device = self.device.name.clone();
         Ok(o)
     }
 }
@@ -592,4 +590,16 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// clap's consistency checks (unique argument ids, valid defaults, …) of every subcommand,
+    /// which otherwise only fire when that subcommand is parsed.
+    #[test]
+    fn command_line_definition_is_consistent() {
+        super::Cli::command().debug_assert();
+    }
 }

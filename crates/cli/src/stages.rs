@@ -26,6 +26,21 @@ pub struct ShardArg {
     shard: Shard,
 }
 
+/// `--device`, shared by the commands that run a network.
+#[derive(Args)]
+pub struct DeviceArg {
+    /// Where the network runs: auto (the best backend compiled in: cuda, then wgpu, then cpu),
+    /// cpu, wgpu or cuda (GPU backends need the build features `wgpu` / `cuda`).
+    #[arg(
+        id = "device",
+        long = "device",
+        value_name = "DEVICE",
+        default_value = "auto",
+        value_parser = ["auto", "cpu", "wgpu", "cuda"]
+    )]
+    pub name: String,
+}
+
 fn report(what: &str, s: &BatchSummary) {
     println!(
         "{what}: {} processed, {} already done (skipped), {} in this shard of {} items",
@@ -152,9 +167,8 @@ pub struct CurateArgs {
         requires = "dinov3"
     )]
     dinov3_normalisation: String,
-    /// Where DINOv3 runs: auto, cpu, wgpu or cuda.
-    #[arg(long, default_value = "auto")]
-    device: String,
+    #[command(flatten)]
+    device: DeviceArg,
     #[command(flatten)]
     shard: ShardArg,
 }
@@ -165,7 +179,7 @@ pub fn run_curate(a: CurateArgs, progress: &dyn pipeline::Progress) -> Result<()
             w,
             a.dinov3_config.as_deref(),
             &a.dinov3_normalisation,
-            &a.device,
+            &a.device.name,
         )?),
         None => Box::new(features::HistogramDescriptor),
     };
@@ -239,16 +253,19 @@ pub struct MasksArgs {
         requires = "segformer"
     )]
     segformer_config: String,
-    /// Where SegFormer runs: auto, cpu, wgpu or cuda.
-    #[arg(long, default_value = "auto")]
-    device: String,
+    #[command(flatten)]
+    device: DeviceArg,
     #[command(flatten)]
     shard: ShardArg,
 }
 
 pub fn run_masks(a: MasksArgs, progress: &dyn pipeline::Progress) -> Result<()> {
     let segmenter: Box<dyn masks::ImageSegmenter> = match &a.segformer {
-        Some(w) => Box::new(SegformerSegmenter::load(w, &a.segformer_config, &a.device)?),
+        Some(w) => Box::new(SegformerSegmenter::load(
+            w,
+            &a.segformer_config,
+            &a.device.name,
+        )?),
         None => Box::new(OfflineSegmenter::default()),
     };
     let opts = MasksOptions {

@@ -37,6 +37,9 @@ pub struct TrainArgs {
     /// Stop with a checkpoint after this many steps (resume later with --resume).
     #[arg(long)]
     stop_after: Option<usize>,
+    // Where training runs (a run may resume on another device: the checkpoint is device-free).
+    #[command(flatten)]
+    device: crate::stages::DeviceArg,
     /// Print the resolved configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
@@ -81,7 +84,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         resume: a.resume.clone(),
         stop: Some(train::trainer::interrupt_flag()?),
         stop_after: a.stop_after,
-        device: None,
+        device: Some(nn::infer::device_by_name(&a.device.name).map_err(anyhow::Error::msg)?),
     };
     let mut bar = TrainBar::default();
     let summary = train::train(&config, &options, &mut bar)

@@ -18,6 +18,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod data;
+pub mod events;
 pub mod loss;
 pub mod mask;
 pub mod metrics;

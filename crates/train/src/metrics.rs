@@ -1,5 +1,5 @@
-//! Run logs: one CSV row per step (`metrics.csv`) and per validation (`validation.csv`), and the
-//! validation scores.
+//! Run logs: one CSV row per step (`metrics.csv`) and per validation (`validation.csv`), the
+//! same scalars as TensorBoard events ([`crate::events`]), and the validation scores.
 //!
 //! The logs are appended to (one line per event, flushed), not rewritten: at 50,000 steps a
 //! rewrite per step would cost quadratic time. On resume the rows past the resumed step (written
@@ -10,6 +10,8 @@ use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::events::EventWriter;
+use crate::trainer::{StepRecord, ValidationRecord};
 use crate::TrainError;
 
 /// Header of `metrics.csv`.
@@ -66,6 +68,84 @@ impl CsvLog {
         writeln!(self.file, "{}", values.join(","))
             .and_then(|_| self.file.flush())
             .map_err(|e| TrainError::io(&self.path, e))
+    }
+}
+
+/// The logs of a run folder: `metrics.csv`, `validation.csv` and a TensorBoard event file.
+pub struct RunLogs {
+    metrics: CsvLog,
+    validation: CsvLog,
+    events: EventWriter,
+}
+
+impl RunLogs {
+    /// Opens the logs in `dir`; `resumed_at` as in [`CsvLog::open`].
+    pub fn open(dir: &Path, resumed_at: Option<usize>) -> Result<Self, TrainError> {
+        Ok(Self {
+            metrics: CsvLog::open(&dir.join("metrics.csv"), METRICS_HEADER, resumed_at)?,
+            validation: CsvLog::open(&dir.join("validation.csv"), VALIDATION_HEADER, resumed_at)?,
+            events: EventWriter::create(dir, resumed_at)?,
+        })
+    }
+
+    /// Logs one optimiser step.
+    pub fn step(&mut self, r: &StepRecord) -> Result<(), TrainError> {
+        let t = &r.terms;
+        self.metrics.row(&[
+            r.step.to_string(),
+            format!("{:e}", r.lr),
+            t.total.to_string(),
+            t.disp.to_string(),
+            t.photo.to_string(),
+            t.smooth.to_string(),
+            t.epe.to_string(),
+            t.within_1px.to_string(),
+            t.within_3px.to_string(),
+            r.grad_norm.to_string(),
+            r.clip_factor.to_string(),
+            format!("{:.4}", r.seconds),
+            format!("{:.4}", r.its_per_s),
+        ])?;
+        self.events.scalars(
+            r.step,
+            &[
+                ("loss/total", t.total.into()),
+                ("loss/disp", t.disp.into()),
+                ("loss/photo", t.photo.into()),
+                ("loss/smooth", t.smooth.into()),
+                ("train/epe", t.epe.into()),
+                ("train/within_1px", t.within_1px.into()),
+                ("train/within_3px", t.within_3px.into()),
+                ("train/lr", r.lr),
+                ("train/grad_norm", r.grad_norm),
+                ("train/its_per_s", r.its_per_s),
+            ],
+        )
+    }
+
+    /// Logs a validation pass (nothing when no pair could be scored).
+    pub fn validation(&mut self, r: &Option<ValidationRecord>) -> Result<(), TrainError> {
+        let Some(r) = r else { return Ok(()) };
+        let s = &r.scores;
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
+        self.validation.row(&[
+            r.step.to_string(),
+            s.epe.to_string(),
+            s.bad_1px.to_string(),
+            s.bad_3px.to_string(),
+            s.pairs.to_string(),
+            opt(s.epe_synchronic),
+            opt(s.epe_diachronic),
+            format!("{:.3}", r.seconds),
+        ])?;
+        let mut scalars = vec![
+            ("validation/epe", s.epe),
+            ("validation/bad_1px", s.bad_1px),
+            ("validation/bad_3px", s.bad_3px),
+        ];
+        scalars.extend(s.epe_synchronic.map(|v| ("validation/epe_synchronic", v)));
+        scalars.extend(s.epe_diachronic.map(|v| ("validation/epe_diachronic", v)));
+        self.events.scalars(r.step, &scalars)
     }
 }
 

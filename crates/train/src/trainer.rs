@@ -17,8 +17,7 @@ use crate::config::TrainConfig;
 use crate::data::{network_inputs, PreparedSample, TrainData, ValidData};
 use crate::loss::{sequence_loss, LossBatch, LossTerms};
 use crate::metrics::{
-    pair_scores, peak_rss_bytes, CsvLog, ValidationAccumulator, ValidationScores, METRICS_HEADER,
-    VALIDATION_HEADER,
+    pair_scores, peak_rss_bytes, RunLogs, ValidationAccumulator, ValidationScores,
 };
 use crate::optim::{assign_param_ids, param_ids, Optimizer};
 use crate::schedule::OneCycle;
@@ -245,10 +244,10 @@ pub fn train(
     })
     .map_err(|e| TrainError::Io(e.to_string()))?;
     let resumed = resume.as_ref().map(|_| start_step);
-    let mut metrics = CsvLog::open(&output.join("metrics.csv"), METRICS_HEADER, resumed)?;
-    let mut vlog = CsvLog::open(&output.join("validation.csv"), VALIDATION_HEADER, resumed)?;
+    let mut logs = RunLogs::open(output, resumed)?;
 
     let mut lines = init.lines.clone();
+    lines.push(format!("device: {base:?}"));
     lines.push(format!(
         "parameters: {:.2} M, trained {:.2} M (mono branch frozen)",
         init.params as f64 / 1e6,
@@ -295,7 +294,7 @@ pub fn train(
     if config.run.validate_at_start && resume.is_none() {
         if let Some(v) = &valid {
             let r = validate(&model, v, &base, config, start_step, observer)?;
-            log_validation(&mut vlog, &r)?;
+            logs.validation(&r)?;
             summary.first_validation = r.as_ref().map(|r| r.scores);
         }
     }
@@ -322,7 +321,7 @@ pub fn train(
             seconds,
             its_per_s: steps_here as f64 / train_seconds.max(1e-9),
         };
-        log_step(&mut metrics, &record)?;
+        logs.step(&record)?;
         observer.step(&record);
         summary.first_loss.get_or_insert(terms.total);
         summary.last_loss = Some(terms.total);
@@ -339,7 +338,7 @@ pub fn train(
         if config.run.validate_every > 0 && done % config.run.validate_every == 0 || last {
             if let Some(v) = &valid {
                 let r = validate(&model, v, &base, config, done, observer)?;
-                log_validation(&mut vlog, &r)?;
+                logs.validation(&r)?;
                 if let Some(r) = r {
                     summary.last_validation = Some(r.scores);
                     if r.scores.epe.is_finite() && session.best_epe.is_none_or(|b| r.scores.epe < b)
@@ -445,41 +444,6 @@ fn validate(
         observer.validated(r);
     }
     Ok(record)
-}
-
-fn log_step(log: &mut CsvLog, r: &StepRecord) -> Result<(), TrainError> {
-    let t = &r.terms;
-    log.row(&[
-        r.step.to_string(),
-        format!("{:e}", r.lr),
-        t.total.to_string(),
-        t.disp.to_string(),
-        t.photo.to_string(),
-        t.smooth.to_string(),
-        t.epe.to_string(),
-        t.within_1px.to_string(),
-        t.within_3px.to_string(),
-        r.grad_norm.to_string(),
-        r.clip_factor.to_string(),
-        format!("{:.4}", r.seconds),
-        format!("{:.4}", r.its_per_s),
-    ])
-}
-
-fn log_validation(log: &mut CsvLog, r: &Option<ValidationRecord>) -> Result<(), TrainError> {
-    let Some(r) = r else { return Ok(()) };
-    let s = &r.scores;
-    let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
-    log.row(&[
-        r.step.to_string(),
-        s.epe.to_string(),
-        s.bad_1px.to_string(),
-        s.bad_3px.to_string(),
-        s.pairs.to_string(),
-        opt(s.epe_synchronic),
-        opt(s.epe_diachronic),
-        format!("{:.3}", r.seconds),
-    ])
 }
 
 fn save_model_atomically(model: &Monster, path: &Path) -> Result<(), TrainError> {
