@@ -637,6 +637,8 @@ fn train_tiny_stops_resumes_and_logs() {
         "3",
         "--stop-after",
         "2",
+        "--device",
+        "cpu",
     ];
     args.extend(small);
     let o = seasonstereo(&args);
@@ -654,8 +656,34 @@ fn train_tiny_stops_resumes_and_logs() {
     assert_eq!(metrics.lines().count(), 4, "{metrics}");
     assert!(metrics.starts_with("step,lr,total,disp,photo,smooth"));
     assert!(run.join("final.safetensors").is_file() && run.join("config.toml").is_file());
+    // One TensorBoard event file per session (the first run and the resumed one).
+    let event_files = std::fs::read_dir(&run)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .starts_with("events.out.tfevents.")
+        })
+        .count();
+    assert_eq!(event_files, 2);
 
     // Errors name the problem.
+    if !cfg!(feature = "wgpu") {
+        let o = seasonstereo(&["train", "--config", "tiny", "--device", "wgpu"]);
+        assert!(
+            !o.status.success() && stderr(&o).contains("--features wgpu"),
+            "{}",
+            stderr(&o)
+        );
+    }
+    let o = seasonstereo(&["train", "--config", "tiny", "--device", "tpu"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("possible values"),
+        "{}",
+        stderr(&o)
+    );
     let o = seasonstereo(&["train", "--config", "tiny", "--set", "run.stepz=3"]);
     assert!(
         !o.status.success() && stderr(&o).contains("stepz"),

@@ -41,5 +41,6 @@ pub mod config;
 pub mod dinov3;
 pub mod infer;
 pub mod monster;
+pub mod resize;
 pub mod segformer;
 pub mod weights;

@@ -5,12 +5,12 @@
 //! image crate), and the format is small: a file of TFRecords (`u64` length, masked CRC-32C of
 //! the length, the bytes, masked CRC-32C of the bytes), each holding a protobuf `Event`
 //! (`tensorflow/core/util/event.proto`): `wall_time` (1, double), `step` (2, int64) and either
-//! `file_version` (3, string) or a `Summary` (5) of `Value`s with `tag` (1, string) and
-//! `simple_value` (2, float).
+//! `file_version` (3, string), a `Summary` (5) of `Value`s with `tag` (1, string) and
+//! `simple_value` (2, float), or a `SessionLog` (7) with its `status` (1).
 //!
-//! A resumed run opens a new file that starts with a `SessionLog` START event at the resumed
-//! step: TensorBoard then drops the events past that step written by the interrupted run, so the
-//! curves read as one run, like the CSV logs.
+//! A resumed run opens a new file that starts with a `SessionLog` START event at the first step
+//! it will log: TensorBoard then drops the events from that step on written by the interrupted
+//! run (it keeps those with a smaller step), so the curves read as one run, like the CSV logs.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -27,7 +27,8 @@ pub struct EventWriter {
 
 impl EventWriter {
     /// Creates a new event file in `dir` (`events.out.tfevents.<seconds>.<pid>.seasonstereo`).
-    /// With `resumed_at = Some(step)` it first records a session restart at `step`.
+    /// With `resumed_at = Some(step)` (the checkpoint's step) it first records a session restart
+    /// at `step + 1`, the first step the resumed run logs.
     pub fn create(dir: &Path, resumed_at: Option<usize>) -> Result<Self, TrainError> {
         let now = wall_time();
         let name = format!(
@@ -45,11 +46,11 @@ impl EventWriter {
         put_bytes(&mut version, 3, b"brain.Event:2");
         writer.write_record(&version)?;
         if let Some(step) = resumed_at {
-            // SessionLog { status (1) = START (1) } in Event field 6.
+            // SessionLog { status (1) = START (1) } in Event field 7.
             let mut session_log = Vec::new();
             put_varint_field(&mut session_log, 1, 1);
-            let mut event = event_header(now, step);
-            put_bytes(&mut event, 6, &session_log);
+            let mut event = event_header(now, step + 1);
+            put_bytes(&mut event, 7, &session_log);
             writer.write_record(&event)?;
         }
         writer.flush()?;
@@ -244,9 +245,10 @@ mod tests {
         assert_eq!(version[1].0, 2); // step
         assert_eq!(version[2], (3, 2, 0, b"brain.Event:2".to_vec()));
 
+        // Resumed after step 7: TensorBoard drops the old events of steps ≥ 8.
         let restart = fields(&recs[1]);
-        assert_eq!((restart[1].0, restart[1].2), (2, 7));
-        assert_eq!(restart[2].0, 6);
+        assert_eq!((restart[1].0, restart[1].2), (2, 8));
+        assert_eq!(restart[2].0, 7);
         assert_eq!(fields(&restart[2].3), vec![(1, 0, 1, Vec::new())]);
 
         let event = fields(&recs[2]);

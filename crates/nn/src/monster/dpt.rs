@@ -9,25 +9,13 @@ use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, PaddingConfig2d};
 use burn::tensor::activation::relu;
-use burn::tensor::module::{conv2d, conv_transpose2d, interpolate};
-use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, InterpolateMode, InterpolateOptions};
+use burn::tensor::module::{conv2d, conv_transpose2d};
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Tensor};
 
 use crate::config::DptConfig;
 use crate::monster::vit::VitFeatures;
-
-/// Bilinear resize to `size` with the given align_corners.
-pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
-    if x.dims()[2..] == size && align_corners {
-        return x; // identity for align_corners = True at the same size
-    }
-    interpolate(
-        x,
-        InterpolateOptions::new(InterpolateMode::Bilinear)
-            .with_output_size(size)
-            .with_align_corners(align_corners),
-    )
-}
+use crate::resize::resize_bilinear;
 
 fn conv(c_in: usize, c_out: usize, k: usize, bias: bool, device: &Device) -> Conv2d {
     Conv2dConfig::new([c_in, c_out], [k, k])

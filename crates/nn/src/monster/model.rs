@@ -44,7 +44,7 @@ use super::cost::{
     build_gwc_volume, disparity_regression, BasicConv3d, Conv2xIn, CostAggregation, FeatureAtt,
     Hourglass, SpxHead, GWC_GROUPS,
 };
-use super::dpt::{infer_mono, resize_bilinear, DptHead};
+use super::dpt::{infer_mono, DptHead};
 use super::features::{
     conv2d, conv_in_block_forward, BasicConvIn, ConvInBlock, FeatTransfer, StereoFeatures,
 };
@@ -57,6 +57,7 @@ use super::update::{
 use super::upsample::{context_upsample, freeze_bn, spx_gru_init, Conv2x};
 use super::vit::{normalize_image, DinoVisionTransformer};
 use crate::config::MonsterConfig;
+use crate::resize::resize_bilinear;
 use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
 
 /// Channels of the stereo matching features (`features[0] = cat(f4 48, stem_4 48)`).

@@ -11,9 +11,11 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{PaddingConfig2d, Relu};
 use burn::tensor::activation::{relu, sigmoid, tanh};
-use burn::tensor::module::{avg_pool2d, interpolate};
-use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions};
+use burn::tensor::module::avg_pool2d;
+use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor};
+
+use crate::resize::resize_bilinear;
 
 fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
     let p = k / 2;
@@ -36,12 +38,7 @@ pub fn pool2x(x: Tensor<4>) -> Tensor<4> {
 /// `interp(x, dest)` = bilinear resize of `x` to the spatial size of `dest`, align_corners=True.
 pub fn interp(x: Tensor<4>, dest: &Tensor<4>) -> Tensor<4> {
     let [_, _, h, w] = dest.dims();
-    interpolate(
-        x,
-        InterpolateOptions::new(InterpolateMode::Bilinear)
-            .with_align_corners(true)
-            .with_output_size([h, w]),
-    )
+    resize_bilinear(x, [h, w], true)
 }
 
 /// Per-level GRU context biases `[cz, cr, cq]`.

@@ -9,11 +9,10 @@ use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::tensor::activation::{gelu, softmax};
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::config::VitConfig;
+use crate::resize::resize_bilinear;
 
 /// `img = 2·(img/255) − 1` (images are float 0–255 RGB, B×3×H×W); used by both branches.
 pub fn normalize_image(img: Tensor<4>) -> Tensor<4> {
@@ -28,12 +27,7 @@ pub fn mono_input(img_normalized: Tensor<4>) -> Tensor<4> {
         (h as f64 * 14.0 / 16.0).floor() as usize,
         (w as f64 * 14.0 / 16.0).floor() as usize,
     ];
-    interpolate(
-        img_normalized,
-        InterpolateOptions::new(InterpolateMode::Bilinear)
-            .with_output_size(size)
-            .with_align_corners(true),
-    )
+    resize_bilinear(img_normalized, size, true)
 }
 
 /// Conv2d 3→E, kernel = stride = patch size.

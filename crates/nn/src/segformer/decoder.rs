@@ -9,7 +9,7 @@ use burn::tensor::{Device, Tensor};
 use super::config::SegformerConfig;
 use super::encoder::{to_map, to_tokens};
 use super::trace::Trace;
-use crate::monster::dpt::resize_bilinear;
+use crate::resize::resize_bilinear;
 
 /// `decode_head.linear_c.i` of HF: a per-pixel projection C_i → D.
 #[derive(Module, Debug)]

@@ -1,0 +1,100 @@
+//! Bilinear resizing of feature maps (PyTorch `F.interpolate(mode='bilinear')`) that every
+//! backend can differentiate.
+//!
+//! burn's `interpolate` has no bilinear backward on the CubeCL backends (wgpu and CUDA panic
+//! with "Bilinear interpolation backward is not supported by JIT backend"), so training on a GPU
+//! needs another route: a tensor that takes part in an autodiff graph is resized axis by axis as
+//! `x[i0]·(1 − λ) + x[i1]·λ` with two `select`s, whose backward (a scatter-add) every backend
+//! has. Tensors outside a graph (inference) keep burn's fused kernel. Both follow PyTorch's
+//! source-index rules, so they agree to float rounding (`tests/resize.rs`).
+
+use burn::tensor::module::interpolate;
+use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
+use burn::tensor::{Int, Tensor, TensorData};
+
+/// Bilinear resize of `B×C×H×W` to `size = [H', W']` with PyTorch's `align_corners` semantics.
+pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
+    if x.dims()[2..] == size {
+        // PyTorch copies in both modes when the size does not change.
+        return x;
+    }
+    if x.is_tracked() {
+        resize_bilinear_separable(x, size, align_corners)
+    } else {
+        interpolate(
+            x,
+            InterpolateOptions::new(InterpolateMode::Bilinear)
+                .with_output_size(size)
+                .with_align_corners(align_corners),
+        )
+    }
+}
+
+/// The differentiable-everywhere path of [`resize_bilinear`]: height, then width, each as two
+/// `select`s and a blend.
+pub fn resize_bilinear_separable(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
+    let x = resize_axis(x, 2, size[0], align_corners);
+    resize_axis(x, 3, size[1], align_corners)
+}
+
+/// Resizes dimension `dim` (2 or 3) of `x` to `len` samples.
+fn resize_axis(x: Tensor<4>, dim: usize, len: usize, align_corners: bool) -> Tensor<4> {
+    let n = x.dims()[dim];
+    if n == len {
+        return x;
+    }
+    let device = x.device();
+    let taps = linear_taps(n, len, align_corners);
+    let index = |v: Vec<i64>| Tensor::<1, Int>::from_data(TensorData::new(v, [len]), &device);
+    let mut shape = [1usize; 4];
+    shape[dim] = len;
+    let weight =
+        |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [len]), &device).reshape(shape);
+    let lo = x.clone().select(dim, index(taps.i0));
+    let hi = x.select(dim, index(taps.i1));
+    lo * weight(taps.w0) + hi * weight(taps.w1)
+}
+
+/// Per output sample: the two source samples and their weights.
+struct LinearTaps {
+    i0: Vec<i64>,
+    i1: Vec<i64>,
+    w0: Vec<f32>,
+    w1: Vec<f32>,
+}
+
+/// PyTorch's `upsample_bilinear2d` indices along one axis of `n` samples resized to `len`:
+/// source `s = i·(n−1)/(len−1)` with align_corners (0 when `len = 1`), else
+/// `s = max((i + ½)·n/len − ½, 0)`; taps `⌊s⌋` and `min(⌊s⌋ + 1, n − 1)`, weights `1 − λ`, `λ`.
+fn linear_taps(n: usize, len: usize, align_corners: bool) -> LinearTaps {
+    let scale = if align_corners {
+        if len > 1 {
+            (n as f32 - 1.0) / (len as f32 - 1.0)
+        } else {
+            0.0
+        }
+    } else {
+        n as f32 / len as f32
+    };
+    let mut taps = LinearTaps {
+        i0: Vec::with_capacity(len),
+        i1: Vec::with_capacity(len),
+        w0: Vec::with_capacity(len),
+        w1: Vec::with_capacity(len),
+    };
+    for i in 0..len {
+        let s = if align_corners {
+            scale * i as f32
+        } else {
+            (scale * (i as f32 + 0.5) - 0.5).max(0.0)
+        };
+        let i0 = (s as usize).min(n - 1);
+        let i1 = (i0 + 1).min(n - 1);
+        let lambda = s - i0 as f32;
+        taps.i0.push(i0 as i64);
+        taps.i1.push(i1 as i64);
+        taps.w0.push(1.0 - lambda);
+        taps.w1.push(lambda);
+    }
+    taps
+}
