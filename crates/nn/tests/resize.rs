@@ -62,7 +62,7 @@ fn gradients_match_the_kernel() {
             let grad = |separable: bool| {
                 let x = input(from[0], from[1], &device).require_grad();
                 let y = if separable {
-                    resize_bilinear(x.clone(), to, align_corners)
+                    resize_bilinear_separable(x.clone(), to, align_corners)
                 } else {
                     native(x.clone(), to, align_corners)
                 };
@@ -80,12 +80,13 @@ fn gradients_match_the_kernel() {
 }
 
 #[test]
-fn tracked_tensors_take_the_separable_path_and_same_size_is_identity() {
+fn same_size_is_identity_and_graphs_are_told_apart() {
     let device = Device::flex().autodiff();
     let x = input(4, 5, &device).require_grad();
-    assert!(x.is_tracked());
-    let same = resize_bilinear(x.clone(), [4, 5], false);
-    assert_eq!(max_abs_diff(same, x.clone()), 0.0);
-    let plain = input(4, 5, &Device::flex());
-    assert!(!plain.is_tracked());
+    assert!(x.is_tracked() && x.device().inner() == Device::flex());
+    for align_corners in [true, false] {
+        let same = resize_bilinear(x.clone(), [4, 5], align_corners);
+        assert_eq!(max_abs_diff(same, x.clone()), 0.0);
+    }
+    assert!(!input(4, 5, &Device::flex()).is_tracked());
 }

@@ -22,10 +22,9 @@ pub(crate) fn encode_rgb_png(image: &Image) -> Result<Vec<u8>, String> {
 /// RGB 0–255; grey is replicated, alpha dropped, 16-bit samples keep their high byte.
 pub(crate) fn decode_image(bytes: &[u8]) -> Result<Image, String> {
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        let (image, depth) =
+        let (mut image, depth) =
             decode_png(bytes, Path::new("the returned PNG")).map_err(|e| e.to_string())?;
         check_size(image.width() as u64, image.height() as u64)?;
-        let mut image = image;
         if depth == PngDepth::Sixteen {
             image
                 .data_mut()
