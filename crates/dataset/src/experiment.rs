@@ -58,13 +58,11 @@ pub(crate) fn read_text(path: &Path, hint: &str) -> Result<String> {
     })
 }
 
-/// Reads an experiment list. As the release: duplicate stems are dropped (first kept) and blank
-/// filenames skipped; unlike it, a malformed stem or flag is an error naming the line.
-pub fn read_experiment_csv(path: &Path) -> Result<Vec<ExperimentRow>> {
-    let text = read_text(
-        path,
-        "write experiment lists with `seasonstereo dataset build` or `dataset world`",
-    )?;
+/// A CSV reader over `text` (cells trimmed) and its header row; errors name `path`.
+fn csv_with_headers<'t>(
+    path: &Path,
+    text: &'t str,
+) -> Result<(csv::Reader<&'t [u8]>, csv::StringRecord)> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_reader(text.as_bytes());
@@ -72,6 +70,17 @@ pub fn read_experiment_csv(path: &Path) -> Result<Vec<ExperimentRow>> {
         .headers()
         .map_err(|e| DatasetError::format(path, e.to_string()))?
         .clone();
+    Ok((reader, headers))
+}
+
+/// Reads an experiment list. As the release: duplicate stems are dropped (first kept) and blank
+/// filenames skipped; unlike it, a malformed stem or flag is an error naming the line.
+pub fn read_experiment_csv(path: &Path) -> Result<Vec<ExperimentRow>> {
+    let text = read_text(
+        path,
+        "write experiment lists with `seasonstereo dataset build` or `dataset world`",
+    )?;
+    let (mut reader, headers) = csv_with_headers(path, &text)?;
     let col = |name: &str| headers.iter().position(|h| h == name);
     let file_col = col("filename")
         .ok_or_else(|| DatasetError::format(path, "must contain at least a 'filename' column"))?;
@@ -140,13 +149,7 @@ pub fn read_pair_list(path: &Path) -> Result<Vec<PairStem>> {
     let is_csv = path.extension().and_then(|e| e.to_str()) == Some("csv");
     let mut names: Vec<(usize, String)> = Vec::new();
     if is_csv {
-        let mut reader = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
-            .from_reader(text.as_bytes());
-        let headers = reader
-            .headers()
-            .map_err(|e| DatasetError::format(path, e.to_string()))?
-            .clone();
+        let (mut reader, headers) = csv_with_headers(path, &text)?;
         let col = ["id", "stem", "pair", "filename"]
             .iter()
             .find_map(|c| headers.iter().position(|h| h == *c))
