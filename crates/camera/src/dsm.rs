@@ -128,6 +128,46 @@ impl DsmGrid {
         Self::of_raster(&read_tiff(path)?, &path.display().to_string())
     }
 
+    /// The grid of a DSM file as users have it: a GeoTIFF, or a plain TIFF whose DFC2019
+    /// georeference sits beside it ([`read_dsm`]).
+    pub fn read(path: impl AsRef<Path>, zone: Option<UtmZone>) -> Result<Self> {
+        Ok(read_dsm(path, zone)?.grid)
+    }
+
+    /// The grid described by a DFC2019 `<AOI>_DSM.txt` (four numbers: lower-left easting and
+    /// northing, size in cells, cell size) for a raster of `width × height` cells in `zone`. The
+    /// upper-left corner of cell (0, 0) is `(E, N + size·res)`.
+    pub fn from_dfc_txt(
+        text: &str,
+        origin: &str,
+        width: usize,
+        height: usize,
+        zone: UtmZone,
+    ) -> Result<Self> {
+        let values: Vec<f64> = text
+            .split_whitespace()
+            .map(|t| t.parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| {
+                CameraError::Georeference(format!(
+                    "{origin}: not a DFC2019 georeference (four numbers \"E N size res\"): {e}"
+                ))
+            })?;
+        let [e, n, size, res] = values[..] else {
+            return Err(CameraError::Georeference(format!(
+                "{origin}: a DFC2019 georeference has four numbers (E N size res), found {}",
+                values.len()
+            )));
+        };
+        if size.fract() != 0.0 || size as usize != height {
+            return Err(CameraError::Georeference(format!(
+                "{origin}: says {size} cells but the DSM has {height} rows"
+            )));
+        }
+        DsmGrid::new(e, n + size * res, res, width, height, zone.epsg())
+            .map_err(|err| CameraError::Georeference(format!("{origin}: {err}")))
+    }
+
     /// The grid's UTM zone.
     pub fn zone(&self) -> UtmZone {
         UtmZone::from_epsg(self.epsg).expect("checked at construction")
@@ -148,36 +188,202 @@ impl DsmGrid {
     }
 }
 
-/// The highest altitude of the points falling in each cell of `grid`, NaN where none does.
-/// Projections run in parallel; the max makes the result independent of the order.
-pub fn rasterize_max(points: &Points, grid: &DsmGrid) -> Image {
+/// A DSM read from disk: heights (nodata mapped to NaN) and the grid they lie on.
+#[derive(Clone, Debug)]
+pub struct DsmRaster {
+    pub image: Image,
+    pub grid: DsmGrid,
+    /// The nodata value of the file, if it declares one.
+    pub nodata: Option<f64>,
+}
+
+/// The sibling DFC2019 georeference of a DSM: `X.txt` beside `X.tif`.
+pub fn dfc_georeference_path(path: &Path) -> std::path::PathBuf {
+    path.with_extension("txt")
+}
+
+/// Reads a DSM as users have it: a GeoTIFF (georeference and EPSG inside), or a plain TIFF with
+/// its DFC2019 georeference in `X.txt` beside `X.tif` (the Data Fusion Contest 2019 truth as
+/// distributed). The `.txt` has no UTM zone: `zone` gives it (the caller knows it from the
+/// cameras, or the user from a flag); a GeoTIFF's own EPSG code always wins. First band only;
+/// a declared nodata value becomes NaN.
+pub fn read_dsm(path: impl AsRef<Path>, zone: Option<UtmZone>) -> Result<DsmRaster> {
+    let path = path.as_ref();
+    let origin = path.display().to_string();
+    let raster = read_tiff(path)?;
+    let (w, h) = raster.image.size();
+    let grid = if raster.georef.is_some() {
+        DsmGrid::of_raster(&raster, &origin)?
+    } else {
+        let txt = dfc_georeference_path(path);
+        if !txt.is_file() {
+            return Err(CameraError::Georeference(format!(
+                "{origin}: the DSM has no georeference and no DFC2019 georeference file {} \
+                 beside it (give a GeoTIFF, or the \"E N size res\" text file)",
+                txt.display()
+            )));
+        }
+        let text = std::fs::read_to_string(&txt).map_err(|e| {
+            CameraError::Georeference(format!("{}: cannot read: {e}", txt.display()))
+        })?;
+        let Some(zone) = zone else {
+            return Err(CameraError::Georeference(format!(
+                "{origin}: its georeference {} has no UTM zone; give one (e.g. --utm-zone 17N) \
+                 or cameras to take it from",
+                txt.display()
+            )));
+        };
+        DsmGrid::from_dfc_txt(&text, &txt.display().to_string(), w, h, zone)?
+    };
+    let mut image = raster.image.channel(0);
+    if let Some(nd) = raster.nodata {
+        for v in image.data_mut() {
+            if f64::from(*v) == nd || (nd.is_nan() && v.is_nan()) {
+                *v = f32::NAN;
+            }
+        }
+    }
+    Ok(DsmRaster {
+        image,
+        grid,
+        nodata: raster.nodata,
+    })
+}
+
+/// How the points falling in one DSM cell become its height.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Gridding {
+    /// The highest point: the benchmark's protocol (and the right choice to compare with its
+    /// numbers), but one wrong point above a roof decides the cell.
+    #[default]
+    Max,
+    /// The median of the points (the upper one of an even count): robust to isolated wrong
+    /// points, for DSMs meant to be used.
+    Median,
+}
+
+/// The flat cell index and altitude of every point that falls on `grid` (projections in
+/// parallel).
+fn cells_of(points: &Points, grid: &DsmGrid) -> Vec<(usize, f32)> {
     let zone = grid.zone();
-    let cells: Vec<(usize, f32)> = points
+    points
         .lonlatalt
         .par_iter()
         .with_min_len(4096)
-        .map(|&[lon, lat, alt]| {
+        .filter_map(|&[lon, lat, alt]| {
             if !(lon.is_finite() && lat.is_finite() && alt.is_finite()) {
-                return (usize::MAX, 0.0);
+                return None;
             }
             let (e, n) = zone.forward(lon, lat);
-            match grid.cell_of(e, n) {
-                Some((c, r)) => (r * grid.width + c, alt as f32),
-                None => (usize::MAX, 0.0),
-            }
+            grid.cell_of(e, n)
+                .map(|(c, r)| (r * grid.width + c, alt as f32))
         })
-        .collect();
+        .collect()
+}
+
+/// The highest altitude of the points falling in each cell of `grid`, NaN where none does.
+/// Projections run in parallel; the max makes the result independent of the order.
+pub fn rasterize_max(points: &Points, grid: &DsmGrid) -> Image {
+    rasterize(points, grid, Gridding::Max)
+}
+
+/// The points gridded on `grid` with `gridding`, NaN where no point falls. The result does not
+/// depend on the order of the points.
+pub fn rasterize(points: &Points, grid: &DsmGrid, gridding: Gridding) -> Image {
+    let mut cells = cells_of(points, grid);
     let mut dsm = Image::filled(grid.width, grid.height, 1, f32::NAN);
     let data = dsm.data_mut();
-    for (i, alt) in cells {
-        if i != usize::MAX {
-            let v = &mut data[i];
-            if v.is_nan() || alt > *v {
-                *v = alt;
+    match gridding {
+        Gridding::Max => {
+            for (i, alt) in cells {
+                let v = &mut data[i];
+                if v.is_nan() || alt > *v {
+                    *v = alt;
+                }
+            }
+        }
+        Gridding::Median => {
+            cells.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+            for run in cells.chunk_by(|a, b| a.0 == b.0) {
+                data[run[0].0] = run[run.len() / 2].1;
             }
         }
     }
     dsm
+}
+
+/// Fills the holes of a DSM that are enclosed by data, ground-first: the usual holes of a
+/// stereo DSM are ground hidden behind buildings in one view and unmatched patches of weak
+/// texture, and a surface model with holes cannot be used for orthorectification, volumes or
+/// line-of-sight.
+///
+/// For each empty cell, 8 rays (the axes and diagonals) walk at most `max_distance` cells to the
+/// first cell with a height. Along each of the 4 lines whose two rays both hit, the lower of the
+/// two heights is kept (an occluded strip lies between a roof and the ground, and belongs to the
+/// ground); the cell gets the median of those values. A cell without such an enclosing line
+/// (outside the images' footprint, or in a hole wider than `2 · max_distance`) stays empty.
+/// Returns the filled DSM and the number of cells filled.
+pub fn fill_holes(dsm: &Image, max_distance: usize) -> (Image, usize) {
+    let (w, h) = dsm.size();
+    let src = dsm.channel(0);
+    let data = src.data();
+    const DIRS: [(i64, i64); 8] = [
+        (1, 0),
+        (-1, 0),
+        (0, 1),
+        (0, -1),
+        (1, 1),
+        (-1, -1),
+        (1, -1),
+        (-1, 1),
+    ];
+    let ray = |x: usize, y: usize, (dx, dy): (i64, i64)| -> Option<f32> {
+        let (mut cx, mut cy) = (x as i64, y as i64);
+        for _ in 0..max_distance {
+            cx += dx;
+            cy += dy;
+            if cx < 0 || cy < 0 || cx >= w as i64 || cy >= h as i64 {
+                return None;
+            }
+            let v = data[cy as usize * w + cx as usize];
+            if v.is_finite() {
+                return Some(v);
+            }
+        }
+        None
+    };
+    let rows: Vec<(Vec<f32>, usize)> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let mut row = data[y * w..(y + 1) * w].to_vec();
+            let mut filled = 0;
+            let mut lows: Vec<f32> = Vec::with_capacity(4);
+            for (x, v) in row.iter_mut().enumerate() {
+                if v.is_finite() {
+                    continue;
+                }
+                lows.clear();
+                for pair in DIRS.chunks_exact(2) {
+                    if let (Some(a), Some(b)) = (ray(x, y, pair[0]), ray(x, y, pair[1])) {
+                        lows.push(a.min(b));
+                    }
+                }
+                if lows.is_empty() {
+                    continue;
+                }
+                lows.sort_unstable_by(f32::total_cmp);
+                *v = lows[(lows.len() - 1) / 2];
+                filled += 1;
+            }
+            (row, filled)
+        })
+        .collect();
+    let filled = rows.iter().map(|r| r.1).sum();
+    let out: Vec<f32> = rows.into_iter().flat_map(|r| r.0).collect();
+    (
+        Image::new(w, h, 1, out).expect("same size as the input"),
+        filled,
+    )
 }
 
 /// Writes a DSM as a float32 GeoTIFF on `grid` (georeference, EPSG, nodata NaN), atomically.

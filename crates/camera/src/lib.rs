@@ -13,7 +13,9 @@ pub mod rpc;
 pub mod triangulate;
 pub mod utm;
 
-pub use dsm::{rasterize_max, write_dsm, DsmGrid};
+pub use dsm::{
+    fill_holes, rasterize, rasterize_max, read_dsm, write_dsm, DsmGrid, DsmRaster, Gridding,
+};
 pub use error::CameraError;
 pub use rpc::RpcModel;
 pub use triangulate::{altitude, evaluation_mask, triangulate_disparity, Points};

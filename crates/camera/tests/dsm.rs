@@ -107,3 +107,98 @@ fn unusable_georeferences_are_errors() {
         "{msg}"
     );
 }
+
+#[test]
+fn dfc2019_truth_as_distributed_reads_with_its_txt_georeference() {
+    let path = support::jax_dev("truth/JAX_068_DSM.tif");
+    // The plain TIFF carries no georeference: the zone must come from somewhere.
+    let msg = camera::read_dsm(&path, None).unwrap_err().to_string();
+    assert!(msg.contains("UTM zone") && msg.contains("JAX_068_DSM.txt"), "{msg}");
+    let zone = UtmZone::new(17, true).unwrap();
+    let dsm = camera::read_dsm(&path, Some(zone)).unwrap();
+    let g = &dsm.grid;
+    assert_eq!((g.width, g.height, g.epsg, g.resolution), (512, 512, 32617, 0.5));
+    // "E N size res" is the lower-left corner: the north edge is N + size·res.
+    assert!((g.x0 - 436078.995946).abs() < 1e-6);
+    assert!((g.y0 - (3357495.999923 + 256.0)).abs() < 1e-6);
+    // LiDAR heights above the ellipsoid in Jacksonville: about −30 to +40 m, no NaN fill.
+    let finite: Vec<f32> = dsm.image.data().iter().copied().filter(|v| v.is_finite()).collect();
+    assert!(finite.len() > 500 * 500);
+    let (lo, hi) = finite
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!(lo > -40.0 && hi < 80.0 && hi - lo > 15.0, "{lo} {hi}");
+    assert_eq!(DsmGrid::read(&path, Some(zone)).unwrap(), dsm.grid);
+}
+
+#[test]
+fn dfc2019_txt_errors_name_the_file() {
+    let zone = UtmZone::new(17, true).unwrap();
+    let bad = DsmGrid::from_dfc_txt("1 2 3", "x.txt", 3, 3, zone).unwrap_err();
+    assert!(bad.to_string().contains("x.txt"), "{bad}");
+    let wrong = DsmGrid::from_dfc_txt("1 2 4 0.5", "x.txt", 3, 3, zone).unwrap_err();
+    assert!(wrong.to_string().contains("4 cells"), "{wrong}");
+    assert!(DsmGrid::from_dfc_txt("1 2 3 0.5", "x.txt", 3, 3, zone).is_ok());
+}
+
+#[test]
+fn median_gridding_ignores_an_isolated_high_point() {
+    let grid = DsmGrid::new(436000.0, 3358000.0, 0.5, 4, 3, 32617).unwrap();
+    let zone = grid.zone();
+    // Three points in cell (1, 1): 10, 11 and a wrong 40 m; one point in cell (3, 0).
+    let at = |c: f64, r: f64, alt: f64| {
+        let (lon, lat) = zone.inverse(436000.0 + (c + 0.5) * 0.5, 3358000.0 - (r + 0.5) * 0.5);
+        [lon, lat, alt]
+    };
+    let points = Points {
+        width: 5,
+        height: 1,
+        lonlatalt: vec![
+            at(1.0, 1.0, 10.0),
+            at(1.0, 1.0, 40.0),
+            at(1.0, 1.0, 11.0),
+            at(3.0, 0.0, 5.0),
+            [f64::NAN, 0.0, 1.0],
+        ],
+    };
+    let max = camera::rasterize(&points, &grid, camera::Gridding::Max);
+    let med = camera::rasterize(&points, &grid, camera::Gridding::Median);
+    assert_eq!(max.get(1, 1, 0), 40.0);
+    assert_eq!(med.get(1, 1, 0), 11.0);
+    assert_eq!((max.get(3, 0, 0), med.get(3, 0, 0)), (5.0, 5.0));
+    assert_eq!(med.data().iter().filter(|v| v.is_finite()).count(), 2);
+    let bits = |i: &Image| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&max), bits(&rasterize_max(&points, &grid)));
+}
+
+#[test]
+fn hole_filling_takes_the_ground_side_and_never_extrapolates() {
+    // 12 × 7 cells: ground at 1 m, a roof at 9 m on columns 6..9, an occluded strip (NaN) on
+    // columns 3..6 between ground and roof, a one-cell hole inside the roof, and nothing on the
+    // last column (outside the footprint).
+    let (w, h) = (12, 7);
+    let mut dsm = Image::filled(w, h, 1, 1.0);
+    for y in 0..h {
+        for x in 6..10 {
+            dsm.set(x, y, 0, 9.0);
+        }
+        for x in 3..6 {
+            dsm.set(x, y, 0, f32::NAN);
+        }
+        dsm.set(11, y, 0, f32::NAN);
+    }
+    dsm.set(7, 3, 0, f32::NAN);
+    let (filled, n) = camera::fill_holes(&dsm, 20);
+    assert_eq!(n, 3 * h + 1);
+    for y in 0..h {
+        for x in 3..6 {
+            assert_eq!(filled.get(x, y, 0), 1.0, "occluded strip at ({x}, {y})");
+        }
+        assert!(filled.get(11, y, 0).is_nan(), "outside the footprint");
+    }
+    assert_eq!(filled.get(7, 3, 0), 9.0, "hole inside the roof");
+    // Too far to reach data: nothing is invented.
+    let (short, m) = camera::fill_holes(&dsm, 1);
+    assert_eq!(m, 1, "only the roof hole is enclosed within one cell");
+    assert!(short.get(4, 3, 0).is_nan());
+}

@@ -35,6 +35,14 @@ pub struct DsmArgs {
     /// EPSG code of the UTM zone (326zz north, 327zz south; default: the zone of the points).
     #[arg(long)]
     epsg: Option<u32>,
+    /// Height of a cell from its points. Default max: the benchmark's protocol, so DSMs compare
+    /// with its numbers; `median` is robust to isolated wrong points (the DSM to use).
+    #[arg(long, value_enum, default_value_t = crate::reconstruct::GriddingArg::Max)]
+    gridding: crate::reconstruct::GriddingArg,
+    /// Fill holes enclosed by data within this many cells, ground first; 0 (default) leaves
+    /// them empty, as the benchmark's protocol does.
+    #[arg(long, value_name = "CELLS", default_value_t = 0)]
+    fill_holes: usize,
     /// Pixels trimmed on every side of the disparity (the benchmark trims 32).
     #[arg(long, default_value_t = 0)]
     border: usize,
@@ -78,6 +86,8 @@ pub fn run(a: DsmArgs) -> Result<()> {
         rpc_right: a.rpc_right,
         grid,
         border: a.border,
+        gridding: a.gridding.into(),
+        fill_holes: (a.fill_holes > 0).then_some(a.fill_holes),
         output: a.output.clone(),
         compare: a.compare,
     })?;

@@ -5,6 +5,7 @@
 mod bars;
 mod dataset;
 mod dsm;
+mod reconstruct;
 mod stages;
 mod train;
 
@@ -44,6 +45,11 @@ enum Command {
     Rectify(RectifyArgs),
     /// Predict the disparity of a rectified pair.
     Predict(PredictArgs),
+    /// From a raw pair to a DSM in one command: rectify from the RPCs, match over the range the
+    /// cameras imply, triangulate and grid (optionally scored against a ground truth).
+    Reconstruct(reconstruct::ReconstructArgs),
+    /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).
+    Score(reconstruct::ScoreArgs),
     /// Turn a rectified disparity into a georeferenced DSM (RPC triangulation, highest point per
     /// cell), on a ground truth's grid or on a UTM grid of your choosing.
     Dsm(dsm::DsmArgs),
@@ -92,10 +98,23 @@ struct WorldArgs {
     name: Option<String>,
 }
 
+/// The classical matcher: census costs aggregated by MGM or SGM, then the left-right check,
+/// uniqueness, median and speckle filters.
 #[derive(Clone, Copy, ValueEnum)]
 enum Method {
-    /// Census transform + Semi-Global Matching with a left-right check.
+    /// More Global Matching (Facciolo et al. 2015, as s2p): the default, best on real pairs.
+    Mgm,
+    /// Semi-Global Matching over 8 (or --four-paths 4) straight paths: faster.
     Sgm,
+}
+
+impl Method {
+    fn aggregation(self) -> matching::Aggregation {
+        match self {
+            Method::Mgm => matching::Aggregation::Mgm,
+            Method::Sgm => matching::Aggregation::Sgm,
+        }
+    }
 }
 
 #[derive(Args)]
@@ -198,8 +217,8 @@ struct PredictArgs {
     /// (NaN = invalid); .png writes a colour-mapped picture.
     #[arg(short, long)]
     output: PathBuf,
-    /// Matching method (when no --model is given).
-    #[arg(long, value_enum, default_value_t = Method::Sgm)]
+    /// Classical matching method (when no --model is given).
+    #[arg(long, value_enum, default_value_t = Method::Mgm)]
     method: Method,
     #[command(flatten)]
     net: NetworkArgs,
@@ -284,12 +303,67 @@ struct SgmArgs {
     #[arg(long)]
     four_paths: bool,
     /// Left-right consistency tolerance, pixels; 0 disables the check.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = SgmParams::default().lr_tolerance.unwrap_or(0.0))]
     lr_tolerance: f32,
+    /// Gradient adaptation of P2 (jumps are cheaper across intensity edges; smaller = stronger);
+    /// 0 keeps P2 constant.
+    #[arg(long, value_name = "K", default_value_t = SgmParams::default().p2_adaptive.unwrap_or(0.0))]
+    p2_adaptive: f32,
+    /// Gaussian smoothing of the images before the census transform, σ in pixels (helps in
+    /// dark shadows); 0 disables it.
+    #[arg(long, value_name = "SIGMA", default_value_t = SgmParams::default().smoothing.unwrap_or(0.0))]
+    smoothing: f32,
+    /// Census window WxH (odd sides, at most 65 pixels).
+    #[arg(long, value_name = "WxH", value_parser = parse_census,
+          default_value_t = format_census(SgmParams::default().census))]
+    census: String,
+    /// Uniqueness ratio: the best cost must beat the best one more than 1 px away by this share;
+    /// 0 disables the test.
+    #[arg(long, value_name = "U", default_value_t = SgmParams::default().uniqueness.unwrap_or(0.0))]
+    uniqueness: f32,
+    /// Speckle filter: connected regions of disparity smaller than this many pixels are removed
+    /// (they survive the left-right check on real pairs and dominate a highest-point DSM); 0
+    /// keeps them.
+    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(0, |s| s.min_area))]
+    speckle: usize,
+    /// Largest disparity step between neighbours of one speckle region, pixels.
+    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(1.0, |s| s.max_diff))]
+    speckle_diff: f32,
+}
+
+fn format_census(c: matching::CensusWindow) -> String {
+    format!("{}x{}", c.width, c.height)
+}
+
+fn parse_census(s: &str) -> Result<String, String> {
+    census_window(s).map(|_| s.to_string())
+}
+
+fn census_window(s: &str) -> Result<matching::CensusWindow, String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WxH, e.g. 9x7, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<usize>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
+    let c = matching::CensusWindow {
+        width: parse(w)?,
+        height: parse(h)?,
+    };
+    if !c.is_valid() {
+        return Err(format!(
+            "census window {s:?} needs odd sides and at most 65 pixels"
+        ));
+    }
+    Ok(c)
 }
 
 impl SgmArgs {
+    /// The matcher's parameters with the default aggregation (MGM).
     fn params(&self) -> Result<SgmParams> {
+        self.params_for(Method::Mgm)
+    }
+
+    /// The matcher's parameters for `method`.
+    fn params_for(&self, method: Method) -> Result<SgmParams> {
         if self.p1 == 0 || self.p2 <= self.p1 {
             bail!(
                 "SGM penalties must satisfy 0 < --p1 < --p2 (got {} and {})",
@@ -300,12 +374,21 @@ impl SgmArgs {
         Ok(SgmParams {
             p1: self.p1,
             p2: self.p2,
+            aggregation: method.aggregation(),
             paths: if self.four_paths {
                 Paths::Four
             } else {
                 Paths::Eight
             },
             lr_tolerance: (self.lr_tolerance > 0.0).then_some(self.lr_tolerance),
+            p2_adaptive: (self.p2_adaptive > 0.0).then_some(self.p2_adaptive),
+            census: census_window(&self.census).map_err(anyhow::Error::msg)?,
+            smoothing: (self.smoothing > 0.0).then_some(self.smoothing),
+            uniqueness: (self.uniqueness > 0.0).then_some(self.uniqueness),
+            speckle: (self.speckle > 1).then_some(matching::Speckle {
+                min_area: self.speckle,
+                max_diff: self.speckle_diff,
+            }),
             ..SgmParams::default()
         })
     }
@@ -328,6 +411,8 @@ struct DemoArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum EvalMethod {
+    /// Census + MGM on each (cropped) rectified pair, range from the cameras.
+    Mgm,
     /// Census + SGM on each (cropped) rectified pair, range from the cameras.
     Sgm,
     /// The split's own disparity/<stem>.iio (LiDAR-derived): the error of the chain itself.
@@ -360,7 +445,7 @@ struct EvalArgs {
     #[arg(long, value_name = "DIR", required_unless_present = "world")]
     truth_dir: Option<PathBuf>,
     /// Compute the disparities with this method (or with --model)...
-    #[arg(long, value_enum, default_value_t = EvalMethod::Sgm)]
+    #[arg(long, value_enum, default_value_t = EvalMethod::Mgm)]
     method: EvalMethod,
     /// ...or read them from DIR/[<SPLIT>/]<stem>.{iio,npy,tif,pfm} (full rectified or crop size).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["method", "model"])]
@@ -494,10 +579,8 @@ fn run(cli: Cli) -> Result<()> {
                     )
                 }
                 None => {
-                    let params = a.sgm.params()?;
-                    let (d, (lo, hi)) = match a.method {
-                        Method::Sgm => predict_sgm(&left, &right, a.range, &params, &progress)?,
-                    };
+                    let params = a.sgm.params_for(a.method)?;
+                    let (d, (lo, hi)) = predict_sgm(&left, &right, a.range, &params, &progress)?;
                     (d, format!("range {lo}..{hi} px"))
                 }
             };
@@ -515,6 +598,8 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::Dsm(a) => dsm::run(a)?,
+        Command::Reconstruct(a) => reconstruct::run(a, &progress)?,
+        Command::Score(a) => reconstruct::run_score(a)?,
         Command::Teacher(a) => stages::run_teacher(a, &progress)?,
         Command::Curate(a) => stages::run_curate(a, &progress)?,
         Command::Masks(a) => stages::run_masks(a, &progress)?,
@@ -558,7 +643,8 @@ fn run(cli: Cli) -> Result<()> {
                         predictor: std::sync::Arc::new(o.load()?),
                     })
                 }
-                (None, EvalMethod::Sgm) => M::Sgm(a.sgm.params()?),
+                (None, EvalMethod::Mgm) => M::Sgm(a.sgm.params_for(Method::Mgm)?),
+                (None, EvalMethod::Sgm) => M::Sgm(a.sgm.params_for(Method::Sgm)?),
                 (None, EvalMethod::GroundTruth) => M::GroundTruth,
             };
             let mut opts = match &a.world {

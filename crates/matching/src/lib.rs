@@ -32,23 +32,29 @@
 //!
 //! 1. [`census`]: census transform of the grey images (default 9×7 window → 62 bits).
 //! 2. `cost`: Hamming distances, `u8` volume `C[y][x][d − d_min]` (disparity innermost).
-//! 3. `aggregate`: 8 (or 4) path SGM with penalties `P1`, `P2` (optionally adapted to the
-//!    image gradient), vectorised over disparities, parallel over scanlines.
+//! 3. `mgm` (default) or `aggregate`: More Global Matching over 8 directions, or 8 (or 4) path
+//!    SGM, with penalties `P1`, `P2` (optionally adapted to the image gradient), vectorised
+//!    over disparities.
 //! 4. `select`: winner-take-all, sub-pixel fit, left–right check, uniqueness, 3×3 median.
-//! 5. [`estimate_range`]: coarse-to-fine range estimation when the caller has none.
+//! 5. [`speckle`]: small connected regions of disparity are removed.
+//! 6. [`estimate_range`]: coarse-to-fine range estimation when the caller has none.
 
 mod aggregate;
 pub mod census;
 mod cost;
 mod error;
 pub mod occlusion;
+mod mgm;
 mod range;
 mod select;
 mod sgm;
+pub mod speckle;
 
 pub use census::CensusWindow;
 pub use error::MatchError;
 pub use range::estimate_range;
 pub use sgm::{
-    match_pair, match_pair_auto, match_pair_with_progress, memory_bytes, Paths, SgmParams,
+    match_pair, match_pair_auto, match_pair_with_progress, memory_bytes, Aggregation, Paths,
+    SgmParams,
 };
+pub use speckle::{remove_speckles, Speckle};

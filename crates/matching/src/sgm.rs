@@ -2,9 +2,11 @@
 //! grey → census → cost volume → aggregation → selection → median.
 
 use crate::aggregate::{aggregate, Dims, Penalties, Progress};
-use crate::census::{census_transform, CensusWindow};
+use crate::census::{census_transform, gaussian_smooth, CensusWindow};
 use crate::cost::build_cost_volume;
 use crate::error::MatchError;
+use crate::mgm::aggregate_mgm;
+use crate::speckle::{remove_speckles, Speckle};
 use crate::select::{median3x3, select, Selection, Subpixel};
 use raster::Image;
 use rayon::prelude::*;
@@ -29,6 +31,18 @@ impl Paths {
     }
 }
 
+/// How the cost volume is aggregated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Aggregation {
+    /// Semi-Global Matching: straight paths ([`SgmParams::paths`]).
+    Sgm,
+    /// More Global Matching (Facciolo et al. 2015): 8 directions, each averaging two
+    /// predecessors; smoother and with fewer wrong islands on real satellite pairs, about twice
+    /// SGM's time (half of it single-threaded). [`SgmParams::paths`] is ignored.
+    #[default]
+    Mgm,
+}
+
 /// Parameters of [`match_pair`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct SgmParams {
@@ -46,9 +60,15 @@ pub struct SgmParams {
     /// range of the input. Disparity jumps become cheap across intensity edges (building
     /// outlines). `None`: constant `P2`.
     pub p2_adaptive: Option<f32>,
+    /// Gaussian smoothing of the grey images before the census transform, σ in pixels: keeps
+    /// the codes of dark, low-contrast areas (shadows, especially in winter images) from being
+    /// sensor noise. `None`: census on the raw grey values.
+    pub smoothing: Option<f32>,
     /// Census window.
     pub census: CensusWindow,
-    /// Aggregation paths.
+    /// SGM or MGM aggregation.
+    pub aggregation: Aggregation,
+    /// Aggregation paths of SGM.
     pub paths: Paths,
     /// Left–right consistency: a disparity is kept when the right view's winner at `x − d`
     /// agrees within this many pixels. `None`: no check.
@@ -62,6 +82,9 @@ pub struct SgmParams {
     pub subpixel: bool,
     /// NaN-aware 3×3 median of the result.
     pub median: bool,
+    /// Speckle removal after the median: connected regions of disparity smaller than
+    /// `min_area` pixels are cleared. `None`: keep them.
+    pub speckle: Option<Speckle>,
     /// Refuse to match (with [`MatchError::TooLarge`]) when [`memory_bytes`] exceeds this.
     pub max_memory: Option<usize>,
 }
@@ -80,12 +103,18 @@ impl Default for SgmParams {
             p1: 16,
             p2: 200,
             p2_adaptive: Some(0.02),
+            smoothing: None,
             census: CensusWindow::default(),
+            aggregation: Aggregation::Mgm,
             paths: Paths::Eight,
             lr_tolerance: Some(1.0),
             uniqueness: Some(0.02),
             subpixel: true,
             median: true,
+            speckle: Some(Speckle {
+                min_area: 50,
+                max_diff: 1.0,
+            }),
             max_memory: None,
         }
     }
@@ -142,6 +171,16 @@ impl SgmParams {
                     "left-right tolerance must be >= 0, got {t}"
                 )));
             }
+        }
+        if let Some(s) = self.smoothing {
+            if !(s > 0.0 && s <= 10.0) {
+                return Err(MatchError::InvalidParams(format!(
+                    "census smoothing must be in (0, 10] px, got {s}"
+                )));
+            }
+        }
+        if let Some(sp) = &self.speckle {
+            sp.validate().map_err(MatchError::InvalidParams)?;
         }
         if let Some(u) = self.uniqueness {
             if !(0.0..1.0).contains(&u) {
@@ -254,8 +293,16 @@ pub(crate) fn match_grey(
     let progress = Progress::new(steps, progress);
     let tick = || progress.tick();
 
-    let lc = census_transform(lg, w, h, params.census);
-    let rc = census_transform(rg, w, h, params.census);
+    let smoothed = params
+        .smoothing
+        .map(|s| (gaussian_smooth(lg, w, h, s), gaussian_smooth(rg, w, h, s)));
+    let (cl, cr) = match &smoothed {
+        Some((a, b)) => (&a[..], &b[..]),
+        None => (lg, rg),
+    };
+    let lc = census_transform(cl, w, h, params.census);
+    let rc = census_transform(cr, w, h, params.census);
+    drop(smoothed);
     build_cost_volume(
         &lc,
         &rc,
@@ -285,14 +332,17 @@ pub(crate) fn match_grey(
         height: h,
         n_disp: n,
     };
-    aggregate(
-        &cost,
-        &mut sum,
-        dims,
-        &pen,
-        params.paths == Paths::Eight,
-        &tick,
-    );
+    match params.aggregation {
+        Aggregation::Sgm => aggregate(
+            &cost,
+            &mut sum,
+            dims,
+            &pen,
+            params.paths == Paths::Eight,
+            &tick,
+        ),
+        Aggregation::Mgm => aggregate_mgm(&cost, &mut sum, dims, &pen, &tick),
+    }
     debug_assert!(params.paths.count() * (64 + params.p2 as usize) < 65536);
     drop(cost);
 
@@ -313,6 +363,9 @@ pub(crate) fn match_grey(
         for _ in 0..h {
             tick();
         }
+    }
+    if let Some(sp) = &params.speckle {
+        remove_speckles(&mut disp, w, h, sp);
     }
     // The sub-pixel fit and the median may move a match by a pixel: check again that it lands
     // inside the right image, on a valid pixel.

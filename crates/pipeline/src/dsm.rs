@@ -5,7 +5,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use camera::{rasterize_max, triangulate_disparity, write_dsm, DsmGrid, Points, RpcModel, UtmZone};
+use camera::{
+    rasterize, triangulate_disparity, write_dsm, DsmGrid, DsmRaster, Gridding, Points, RpcModel,
+    UtmZone,
+};
 use raster::{Image, Mask};
 
 use crate::eval::aggregate::median;
@@ -38,6 +41,11 @@ pub struct DsmOptions {
     pub grid: GridChoice,
     /// Pixels trimmed on every side before triangulating (the benchmark trims 32).
     pub border: usize,
+    /// Highest point per cell (the benchmark's protocol) or the median.
+    pub gridding: Gridding,
+    /// Fill the holes enclosed by data within this many cells ([`camera::fill_holes`]);
+    /// `None`: leave them empty (the benchmark's protocol).
+    pub fill_holes: Option<usize>,
     /// Output GeoTIFF.
     pub output: PathBuf,
     /// A reference DSM to compare with after alignment.
@@ -61,6 +69,9 @@ pub struct Comparison {
 pub struct DsmSummary {
     pub points: usize,
     pub grid: DsmGrid,
+    /// Cells with a triangulated point.
+    pub measured_cells: usize,
+    /// Cells with a height in the output (measured, plus those filled).
     pub filled_cells: usize,
     pub comparison: Option<Comparison>,
 }
@@ -119,8 +130,10 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
             opts.disparity.display()
         );
     }
+    // A DFC2019 truth (plain TIFF + .txt) has no zone: the left camera's is the AOI's.
+    let zone = UtmZone::from_lonlat(rpc_left.lon_offset, rpc_left.lat_offset);
     let grid = match &opts.grid {
-        GridChoice::Like(path) => DsmGrid::read_geotiff(path)
+        GridChoice::Like(path) => DsmGrid::read(path, Some(zone))
             .with_context(|| format!("reading the grid of {}", path.display()))?,
         GridChoice::Resolution {
             resolution,
@@ -128,15 +141,20 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
             epsg,
         } => grid_for(&points, *resolution, *bounds, *epsg)?,
     };
-    let dsm = rasterize_max(&points, &grid);
+    let mut dsm = rasterize(&points, &grid, opts.gridding);
+    let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
+    if let Some(distance) = opts.fill_holes {
+        dsm = camera::fill_holes(&dsm, distance).0;
+    }
     write_dsm(&opts.output, &dsm, &grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
     let comparison = match &opts.compare {
-        Some(reference) => Some(compare_with(&dsm, &grid, reference)?),
+        Some(reference) => Some(compare_with(&dsm, &grid, reference, zone)?),
         None => None,
     };
     Ok(DsmSummary {
         points: points.valid_count(),
+        measured_cells,
         filled_cells: dsm.data().iter().filter(|v| v.is_finite()).count(),
         grid,
         comparison,
@@ -195,21 +213,23 @@ fn grid_for(
 }
 
 /// Aligns `dsm` to the reference DSM (same grid required) and measures |Δh|.
-fn compare_with(dsm: &Image, grid: &DsmGrid, reference: &Path) -> Result<Comparison> {
-    let raster = raster::formats::read_tiff(reference)?;
-    let ref_grid = DsmGrid::of_raster(&raster, &reference.display().to_string())?;
+fn compare_with(
+    dsm: &Image,
+    grid: &DsmGrid,
+    reference: &Path,
+    zone: UtmZone,
+) -> Result<Comparison> {
+    let DsmRaster {
+        image: truth,
+        grid: ref_grid,
+        ..
+    } = camera::read_dsm(reference, Some(zone))?;
     if &ref_grid != grid {
         bail!(
             "{}: the reference DSM is on another grid; build the DSM with --like {}",
             reference.display(),
             reference.display()
         );
-    }
-    let mut truth = raster.image.channel(0);
-    if let Some(nodata) = raster.nodata.filter(|v| !v.is_nan()) {
-        for v in truth.data_mut().iter_mut().filter(|v| **v == nodata as f32) {
-            *v = f32::NAN;
-        }
     }
     let a = align(&truth, dsm, &AlignParams::default()).with_context(|| {
         format!(

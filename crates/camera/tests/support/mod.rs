@@ -21,3 +21,19 @@ pub fn anchor(rel: &str) -> PathBuf {
 pub const JAX_JSON: &str = "rpcm/tests/test_rpc_files/JAX_068_001_RGB.json";
 pub const S2P_IMG1: &str = "s2p/tests/data/input_pair/img_01.tif";
 pub const S2P_IMG2: &str = "s2p/tests/data/input_pair/img_02.tif";
+
+/// `<shared>/data/dfc2019-jax068-dev/<rel>`: real WorldView-3 crops of JAX_068 with their
+/// cameras and LiDAR truth, read in place.
+pub fn jax_dev(rel: &str) -> PathBuf {
+    let p = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/dfc2019-jax068-dev/"
+    ))
+    .join(rel);
+    assert!(
+        p.exists(),
+        "development data file {} is missing: these tests need /work/shared/data",
+        p.display()
+    );
+    p
+}

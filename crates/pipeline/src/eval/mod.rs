@@ -54,7 +54,7 @@ pub mod table;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use camera::{DsmGrid, RpcModel};
+use camera::{DsmGrid, DsmRaster, RpcModel, UtmZone};
 use matching::SgmParams;
 use raster::formats::{read_homographies, read_tiff};
 use raster::geometry::{crop, crop_homography};
@@ -104,7 +104,10 @@ impl Method {
     /// The default row name of the method in Table 1.
     pub fn default_name(&self) -> String {
         match self {
-            Method::Sgm(_) => "SGM (census)".to_string(),
+            Method::Sgm(p) => match p.aggregation {
+                matching::Aggregation::Mgm => "MGM (census)".to_string(),
+                matching::Aggregation::Sgm => "SGM (census)".to_string(),
+            },
             Method::Predictions(dir) => dir
                 .file_name()
                 .map(|n| n.to_string_lossy().to_string())
@@ -197,35 +200,24 @@ pub struct EvalReport {
 }
 
 /// The ground truth of one AOI, read once for all its pairs.
-struct Truth {
-    aoi: String,
-    dsm: Image,
-    grid: DsmGrid,
-    exclusions: Exclusions,
+pub struct Truth {
+    pub aoi: String,
+    /// Heights, NaN where the truth has none.
+    pub dsm: Image,
+    pub grid: DsmGrid,
+    pub exclusions: Exclusions,
 }
 
 impl Truth {
-    fn read(files: &TruthFiles, aoi: &str) -> Result<Truth> {
+    /// Reads the truth of `aoi`; `zone` is the UTM zone of the AOI (from its cameras), used when
+    /// the DSM is a DFC2019 plain TIFF with its `.txt` georeference.
+    pub fn read(files: &TruthFiles, aoi: &str, zone: UtmZone) -> Result<Truth> {
         let path = &files.dsm;
-        let raster = read_tiff(path)
+        let DsmRaster {
+            image: dsm, grid, ..
+        } = camera::read_dsm(path, Some(zone))
             .with_context(|| format!("reading the ground-truth DSM {}", path.display()))?;
-        let Some(georef) = raster.georef.clone() else {
-            bail!(
-                "{}: the ground-truth DSM has no georeference (GeoTIFF geotransform and UTM EPSG code needed)",
-                path.display()
-            );
-        };
-        let mut dsm = raster.image.channel(0);
-        if let Some(nd) = raster.nodata {
-            for v in dsm.data_mut() {
-                if (*v as f64) == nd || (nd.is_nan() && v.is_nan()) {
-                    *v = f32::NAN;
-                }
-            }
-        }
         let (w, h) = dsm.size();
-        let grid = DsmGrid::from_georeference(&georef, w, h)
-            .with_context(|| format!("the grid of the ground-truth DSM {}", path.display()))?;
         let cls = read_tiff(&files.cls)
             .with_context(|| format!("reading the ground-truth classes {}", files.cls.display()))?
             .image;
@@ -476,13 +468,14 @@ fn evaluate_pair(
     }
 
     // Ground truth of the AOI (cached across its pairs).
+    let rpc_left = read_rpc(&files.rpc_left, "left")?;
+    let rpc_right = read_rpc(&files.rpc_right, "right")?;
     if truth.as_ref().is_none_or(|t| t.aoi != files.aoi) {
-        *truth = Some(Truth::read(&files.truth, &files.aoi)?);
+        let zone = UtmZone::from_lonlat(rpc_left.lon_offset, rpc_left.lat_offset);
+        *truth = Some(Truth::read(&files.truth, &files.aoi, zone)?);
     }
     let truth = truth.as_ref().expect("just read");
 
-    let rpc_left = read_rpc(&files.rpc_left, "left")?;
-    let rpc_right = read_rpc(&files.rpc_right, "right")?;
     let (hl, hr) = read_homographies(&files.homography)
         .with_context(|| format!("reading the homographies {}", files.homography.display()))?;
     let left_img = raster::read_image(&files.left)

@@ -1,0 +1,233 @@
+//! `seasonstereo reconstruct` (raw pair → DSM) and `seasonstereo score` (any DSM vs a truth).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use clap::{Args, ValueEnum};
+use pipeline::dsm::GridChoice;
+use pipeline::eval::metrics::DsmScores;
+use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
+
+use crate::{Method, NetworkArgs, RectifyArgs, SgmArgs};
+
+/// How the points of one DSM cell become its height.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum GriddingArg {
+    /// Highest point per cell: the benchmark's protocol; one wrong point above a roof decides
+    /// the cell.
+    Max,
+    /// Median of the points per cell: robust to isolated wrong points.
+    Median,
+}
+
+impl From<GriddingArg> for camera::Gridding {
+    fn from(g: GriddingArg) -> Self {
+        match g {
+            GriddingArg::Max => camera::Gridding::Max,
+            GriddingArg::Median => camera::Gridding::Median,
+        }
+    }
+}
+
+#[derive(Args)]
+#[command(after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
+    altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W), \
+    triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
+    --work (default OUTPUT_work/: L/, R/, homography/, rectify/, disparity/), in the layout \
+    `seasonstereo eval` reads.\n\n\
+    Example (DFC2019 Jacksonville, bundle-adjusted cameras, scored against the LiDAR truth):\n  \
+    D=../shared/data/dfc2019-jax068-dev\n  seasonstereo reconstruct $D/images/JAX_068_006_RGB.tif \
+    $D/images/JAX_068_020_RGB.tif --rpc-left $D/rpcs/ba/JAX_068_006_RGB.json --rpc-right \
+    $D/rpcs/ba/JAX_068_020_RGB.json --like $D/truth/JAX_068_DSM.tif --truth \
+    $D/truth/JAX_068_DSM.tif -o out/jax/006-020.tif")]
+pub struct ReconstructArgs {
+    /// Left raw image: a GeoTIFF with its RPC (tag 50844), or any raster with --rpc-left.
+    left: PathBuf,
+    /// Right raw image, idem with --rpc-right.
+    right: PathBuf,
+    /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Left camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
+    #[arg(long, value_name = "JSON")]
+    rpc_left: Option<PathBuf>,
+    /// Right camera as SatNeRF/rpcm JSON.
+    #[arg(long, value_name = "JSON")]
+    rpc_right: Option<PathBuf>,
+    /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
+    #[arg(long, value_name = "X,Y,W,H", value_parser = RectifyArgs::parse_roi)]
+    roi: Option<camera::rectify::Roi>,
+    /// Altitudes of the scene MIN:MAX, metres. Default: min_alt/max_alt of the JSON cameras, else
+    /// the RPCs' altitude offset ± scale.
+    #[arg(long, value_name = "MIN:MAX", value_parser = RectifyArgs::parse_alt_range, allow_hyphen_values = true)]
+    alt_range: Option<(f64, f64)>,
+    /// Folder of the intermediate files (default: OUTPUT without extension + "_work").
+    #[arg(long, value_name = "DIR")]
+    work: Option<PathBuf>,
+    /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
+    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
+    like: Option<PathBuf>,
+    /// Cell size in metres (without --like; the grid covers the points).
+    #[arg(long, default_value_t = 0.5)]
+    resolution: f64,
+    /// EPSG code of the UTM zone (without --like; default: the zone of the points).
+    #[arg(long)]
+    epsg: Option<u32>,
+    /// Height of a cell from its points. Default median: robust, the DSM to use. `max` is the
+    /// benchmark's protocol (what `seasonstereo eval` does).
+    #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
+    gridding: GriddingArg,
+    /// Fill the DSM's holes enclosed by data within this many cells, ground first (the ground
+    /// hidden behind buildings, unmatched patches); 0 leaves them empty, as the benchmark's
+    /// protocol does.
+    #[arg(long, value_name = "CELLS", default_value_t = 40)]
+    fill_holes: usize,
+    /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)
+    /// with the benchmark's metric; needs --like on the same file.
+    #[arg(long, value_name = "DSM", requires = "like")]
+    truth: Option<PathBuf>,
+    /// Classical matching method (when no --model is given).
+    #[arg(long, value_enum, default_value_t = Method::Mgm)]
+    method: Method,
+    #[command(flatten)]
+    sgm: SgmArgs,
+    #[command(flatten)]
+    net: NetworkArgs,
+}
+
+/// One line with the benchmark's scores.
+pub fn format_scores(s: &DsmScores) -> String {
+    let m = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3} m"));
+    format!(
+        "MAE filtered {} (raw {}, no water {}), coverage {}, shift {},{} cells, offset {}",
+        m(s.mae_filtered),
+        m(s.mae_raw),
+        m(s.mae_no_water),
+        s.coverage
+            .map_or("-".into(), |c| format!("{:.1} %", 100.0 * c)),
+        s.dx,
+        s.dy,
+        s.offset.map_or("-".into(), |o| format!("{o:+.3} m"))
+    )
+}
+
+pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> {
+    if let (Some(t), Some(l)) = (&a.truth, &a.like) {
+        if t != l {
+            bail!(
+                "--truth {} must be the DSM given to --like (the scores need its grid)",
+                t.display()
+            );
+        }
+    }
+    let matcher = match a.net.model {
+        Some(_) => Matcher::Network(a.net.monster_options()?),
+        None => Matcher::Classical(a.sgm.params_for(a.method)?),
+    };
+    let grid = match &a.like {
+        Some(p) => GridChoice::Like(p.clone()),
+        None => GridChoice::Resolution {
+            resolution: a.resolution,
+            bounds: None,
+            epsg: a.epsg,
+        },
+    };
+    let opts = ReconstructOptions {
+        left: a.left,
+        right: a.right,
+        rpc_left: a.rpc_left,
+        rpc_right: a.rpc_right,
+        roi: a.roi,
+        alt_range: a.alt_range,
+        matcher,
+        output: a.output.clone(),
+        work_dir: a.work,
+        grid,
+        gridding: a.gridding.into(),
+        fill_holes: (a.fill_holes > 0).then_some(a.fill_holes),
+        border: 0,
+        truth: a.truth,
+    };
+    let s = reconstruct(&opts, progress)?;
+    let r = &s.rectified;
+    let times: Vec<String> = s
+        .seconds
+        .iter()
+        .map(|(k, t)| format!("{k} {t:.1} s"))
+        .collect();
+    println!(
+        "wrote {} ({}x{} cells of {} m, EPSG:{}, {:.1} % measured, {:.1} % with a height) from pair {} ({}x{} px, disparity {}:{} px, {:.1} % matched); {}",
+        a.output.display(),
+        s.dsm.grid.width,
+        s.dsm.grid.height,
+        s.dsm.grid.resolution,
+        s.dsm.grid.epsg,
+        100.0 * s.dsm.measured_cells as f64 / (s.dsm.grid.width * s.dsm.grid.height) as f64,
+        100.0 * s.dsm.filled_cells as f64 / (s.dsm.grid.width * s.dsm.grid.height) as f64,
+        r.stem,
+        r.size.0,
+        r.size.1,
+        r.disparity_range.0,
+        r.disparity_range.1,
+        100.0 * s.matched,
+        times.join(", ")
+    );
+    if let Some(sc) = &s.scores {
+        println!("vs truth: {}", format_scores(sc));
+    }
+    Ok(())
+}
+
+#[derive(Args)]
+#[command(after_help = "The benchmark's metric on any DSM already on the truth's grid (e.g. \
+    from `reconstruct --like`, `dsm --like`, or s2p): integer (dx, dy) shift within ±5 cells \
+    maximising NCC, vertical offset b = mean(truth) − mean(DSM), MAE over cells where both exist \
+    (filtered: without foliage 5 and water 9 of <AOI>_CLS.tif), coverage = share of truth cells \
+    with a value.")]
+pub struct ScoreArgs {
+    /// DSMs to score (GeoTIFF on the truth's grid).
+    #[arg(required = true)]
+    dsm: Vec<PathBuf>,
+    /// Ground truth <AOI>_DSM.tif (GeoTIFF, or DFC2019 plain TIFF + <AOI>_DSM.txt); its
+    /// <AOI>_CLS.tif (and optional <AOI>_WATER.png) beside it.
+    #[arg(long, value_name = "DSM")]
+    truth: PathBuf,
+    /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (JAX), 21S (Buenos Aires),
+    /// 15N (Omaha).
+    #[arg(long, value_name = "ZONE", value_parser = parse_zone, default_value = "17N")]
+    utm_zone: camera::UtmZone,
+    /// Write the scores as JSON lines to this file too.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+fn parse_zone(s: &str) -> Result<camera::UtmZone, String> {
+    let t = s.trim().to_ascii_uppercase();
+    let (num, hemi) = t.split_at(t.len().saturating_sub(1));
+    let north = match hemi {
+        "N" => true,
+        "S" => false,
+        _ => return Err(format!("expected a zone like 17N or 21S, got {s:?}")),
+    };
+    let zone: u8 = num
+        .parse()
+        .map_err(|e| format!("zone number in {s:?}: {e}"))?;
+    camera::UtmZone::new(zone, north).map_err(|e| e.to_string())
+}
+
+pub fn run_score(a: ScoreArgs) -> Result<()> {
+    let truth = pipeline::score::read_truth(&a.truth, a.utm_zone)?;
+    let mut lines = String::new();
+    for path in &a.dsm {
+        let s = pipeline::score::score_dsm_file(path, &truth)?;
+        println!("{}: {}", path.display(), format_scores(&s));
+        let mut v = serde_json::to_value(&s)?;
+        v["dsm"] = serde_json::Value::String(path.display().to_string());
+        lines.push_str(&v.to_string());
+        lines.push('\n');
+    }
+    if let Some(j) = &a.json {
+        raster::formats::write_atomically(j, |f| std::io::Write::write_all(f, lines.as_bytes()))?;
+    }
+    Ok(())
+}

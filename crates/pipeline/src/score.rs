@@ -1,0 +1,56 @@
+//! Scoring a DSM file against a ground truth with the benchmark's metric (registration by an
+//! integer NCC shift and a vertical offset, foliage and water masked), whoever made the DSM:
+//! `seasonstereo reconstruct`, `dsm`, or another tool such as s2p, on the truth's grid.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use camera::{DsmRaster, UtmZone};
+
+use crate::eval::layout::TruthFiles;
+use crate::eval::metrics::{score_dsm, DsmScores};
+use crate::eval::Truth;
+
+/// The truth of a `<AOI>_DSM.tif` path: the DSM, and the `<AOI>_CLS.tif` and `<AOI>_WATER.png`
+/// beside it. `zone` is used when the DSM is a DFC2019 plain TIFF with a `.txt` georeference.
+pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
+    let name = dsm
+        .file_name()
+        .and_then(|n| n.to_str())
+        .with_context(|| format!("{}: not a file name", dsm.display()))?;
+    let Some(aoi) = name
+        .strip_suffix("_DSM.tif")
+        .or_else(|| name.strip_suffix("_DSM.tiff"))
+    else {
+        bail!(
+            "{}: a ground-truth DSM is named <AOI>_DSM.tif (its classes <AOI>_CLS.tif beside it)",
+            dsm.display()
+        );
+    };
+    let dir = dsm.parent().unwrap_or(Path::new("."));
+    let mut files = TruthFiles::new(dir, aoi);
+    files.dsm = dsm.to_path_buf();
+    Truth::read(&files, aoi, zone)
+}
+
+/// Scores the DSM at `path` (on the truth's grid) against `truth`.
+pub fn score_dsm_file(path: &Path, truth: &Truth) -> Result<DsmScores> {
+    let zone = truth.grid.zone();
+    let DsmRaster { image, grid, .. } = camera::read_dsm(path, Some(zone))
+        .with_context(|| format!("reading the DSM {}", path.display()))?;
+    if grid != truth.grid {
+        bail!(
+            "{}: the DSM is not on the ground truth's grid ({}x{} cells of {} m at {:.2}, {:.2}); \
+             make it with --like {}_DSM.tif",
+            path.display(),
+            truth.grid.width,
+            truth.grid.height,
+            truth.grid.resolution,
+            truth.grid.x0,
+            truth.grid.y0,
+            truth.aoi
+        );
+    }
+    score_dsm(&image, &truth.dsm, &truth.exclusions, &Default::default())
+        .with_context(|| format!("scoring {}", path.display()))
+}

@@ -1,0 +1,115 @@
+//! The classical chain on real WorldView-3 imagery: DFC2019 JAX_068 development pairs (read in
+//! place from `../shared/data/dfc2019-jax068-dev`), from the raw crops and their bundle-adjusted
+//! RPCs to a DSM scored against the LiDAR truth as distributed (plain TIFF + `_DSM.txt`).
+//!
+//! Bounds are set with margin above what the default matcher reaches (BENCHMARKS.md, "Real
+//! imagery"), below what the chain reached before speckle removal and MGM (4.4 / 10.1 m).
+
+use std::path::{Path, PathBuf};
+
+use camera::{Gridding, UtmZone};
+use matching::SgmParams;
+use pipeline::dsm::GridChoice;
+use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
+use pipeline::Silent;
+
+fn jax(rel: &str) -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/dfc2019-jax068-dev")
+        .join(rel);
+    assert!(
+        p.exists(),
+        "development data {} is missing: these tests need /work/shared/data",
+        p.display()
+    );
+    p
+}
+
+/// Reconstructs pair `l`–`r` with the defaults and returns (MAE filtered, coverage, measured
+/// share of the truth grid).
+fn reconstruct_pair(l: &str, r: &str, fill: Option<usize>) -> (f64, f64, f64) {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = jax("truth/JAX_068_DSM.tif");
+    let opts = ReconstructOptions {
+        left: jax(&format!("images/JAX_068_{l}_RGB.tif")),
+        right: jax(&format!("images/JAX_068_{r}_RGB.tif")),
+        rpc_left: Some(jax(&format!("rpcs/ba/JAX_068_{l}_RGB.json"))),
+        rpc_right: Some(jax(&format!("rpcs/ba/JAX_068_{r}_RGB.json"))),
+        roi: None,
+        alt_range: None,
+        matcher: Matcher::Classical(SgmParams::default()),
+        output: dir.path().join("dsm.tif"),
+        work_dir: None,
+        grid: GridChoice::Like(truth.clone()),
+        gridding: Gridding::Median,
+        fill_holes: fill,
+        border: 0,
+        truth: Some(truth),
+    };
+    let s = reconstruct(&opts, &Silent).unwrap();
+    // The intermediate files are kept in the layout `eval` reads.
+    let work = dir.path().join("dsm_work");
+    let stem = format!("JAX_068_{l}_RGB-JAX_068_{r}_RGB");
+    for sub in ["L", "R", "disparity"] {
+        assert!(work.join(sub).join(format!("{stem}.iio")).is_file(), "{sub}");
+    }
+    assert!(work.join("homography").join(format!("{stem}.npz")).is_file());
+    let sc = s.scores.expect("scored against the truth");
+    let cells = (s.dsm.grid.width * s.dsm.grid.height) as f64;
+    (
+        sc.mae_filtered.unwrap(),
+        sc.coverage.unwrap(),
+        s.dsm.measured_cells as f64 / cells,
+    )
+}
+
+#[test]
+fn near_synchronic_pair_003_004_reaches_lidar_accuracy() {
+    let (mae, coverage, measured) = reconstruct_pair("003", "004", Some(40));
+    eprintln!("003-004: MAE {mae:.3} m, coverage {coverage:.3}, measured {measured:.3}");
+    assert!(mae < 1.6, "MAE {mae}");
+    assert!(coverage > 0.88, "coverage {coverage}");
+    assert!(measured > 0.5, "measured {measured}");
+}
+
+#[test]
+fn cross_season_pair_006_020_winter_summer_stays_close_to_synchronic() {
+    let (mae, coverage, measured) = reconstruct_pair("006", "020", Some(40));
+    eprintln!("006-020: MAE {mae:.3} m, coverage {coverage:.3}, measured {measured:.3}");
+    assert!(mae < 2.3, "MAE {mae}");
+    assert!(coverage > 0.88, "coverage {coverage}");
+    // Without hole filling the DSM keeps only measured cells, and they are accurate.
+    let (mae_raw, coverage_raw, _) = reconstruct_pair("006", "020", None);
+    eprintln!("006-020 unfilled: MAE {mae_raw:.3} m, coverage {coverage_raw:.3}");
+    assert!(mae_raw < 1.3, "MAE {mae_raw}");
+    assert!(coverage_raw > 0.4 && coverage_raw < coverage);
+}
+
+#[test]
+fn dfc2019_truth_as_distributed_scores_a_dsm() {
+    let truth = pipeline::score::read_truth(
+        &jax("truth/JAX_068_DSM.tif"),
+        UtmZone::new(17, true).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(truth.aoi, "JAX_068");
+    assert_eq!(truth.grid.epsg, 32617);
+    // The truth scored against itself: zero error, full coverage, foliage (class 5) masked.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("self.tif");
+    camera::write_dsm(&path, &truth.dsm, &truth.grid).unwrap();
+    let s = pipeline::score::score_dsm_file(&path, &truth).unwrap();
+    assert_eq!((s.dx, s.dy), (0, 0));
+    assert!(s.mae_filtered.unwrap() < 1e-6);
+    assert!((s.coverage.unwrap() - 1.0).abs() < 1e-12);
+    let foliage = truth.exclusions.foliage.count();
+    assert!(foliage > 5000, "class 5 cells: {foliage}");
+    assert_eq!(s.cells + foliage, truth.dsm.data().iter().filter(|v| v.is_finite()).count());
+    // A DSM on another grid is refused with the fix.
+    let other = camera::DsmGrid::new(truth.grid.x0 + 1.0, truth.grid.y0, 0.5, 512, 512, 32617)
+        .unwrap();
+    let off = dir.path().join("off.tif");
+    camera::write_dsm(&off, &truth.dsm, &other).unwrap();
+    let msg = format!("{:#}", pipeline::score::score_dsm_file(&off, &truth).unwrap_err());
+    assert!(msg.contains("--like"), "{msg}");
+}
