@@ -309,10 +309,6 @@ struct SgmArgs {
     /// 0 keeps P2 constant.
     #[arg(long, value_name = "K", default_value_t = SgmParams::default().p2_adaptive.unwrap_or(0.0))]
     p2_adaptive: f32,
-    /// Gaussian smoothing of the images before the census transform, σ in pixels (helps in
-    /// dark shadows); 0 disables it.
-    #[arg(long, value_name = "SIGMA", default_value_t = SgmParams::default().smoothing.unwrap_or(0.0))]
-    smoothing: f32,
     /// Census window WxH (odd sides, at most 65 pixels).
     #[arg(long, value_name = "WxH", value_parser = parse_census,
           default_value_t = format_census(SgmParams::default().census))]
@@ -383,7 +379,6 @@ impl SgmArgs {
             lr_tolerance: (self.lr_tolerance > 0.0).then_some(self.lr_tolerance),
             p2_adaptive: (self.p2_adaptive > 0.0).then_some(self.p2_adaptive),
             census: census_window(&self.census).map_err(anyhow::Error::msg)?,
-            smoothing: (self.smoothing > 0.0).then_some(self.smoothing),
             uniqueness: (self.uniqueness > 0.0).then_some(self.uniqueness),
             speckle: (self.speckle > 1).then_some(matching::Speckle {
                 min_area: self.speckle,

@@ -2,7 +2,7 @@
 //! grey → census → cost volume → aggregation → selection → median.
 
 use crate::aggregate::{aggregate, Dims, Penalties, Progress};
-use crate::census::{census_transform, gaussian_smooth, CensusWindow};
+use crate::census::{census_transform, CensusWindow};
 use crate::cost::build_cost_volume;
 use crate::error::MatchError;
 use crate::mgm::aggregate_mgm;
@@ -60,10 +60,6 @@ pub struct SgmParams {
     /// range of the input. Disparity jumps become cheap across intensity edges (building
     /// outlines). `None`: constant `P2`.
     pub p2_adaptive: Option<f32>,
-    /// Gaussian smoothing of the grey images before the census transform, σ in pixels: keeps
-    /// the codes of dark, low-contrast areas (shadows, especially in winter images) from being
-    /// sensor noise. `None`: census on the raw grey values.
-    pub smoothing: Option<f32>,
     /// Census window.
     pub census: CensusWindow,
     /// SGM or MGM aggregation.
@@ -90,20 +86,20 @@ pub struct SgmParams {
 }
 
 impl Default for SgmParams {
-    /// Tuned for satellite-like images with sharp building edges (on the procedural world and the
-    /// synthetic tests): 9×7 census, `P1 = 16`, `P2 = 200` adapted to the gradient (`k = 0.02`:
-    /// a jump costs `P2 / 3` across an edge of 4 % of the image's range, `P1 + 1` across strong
-    /// edges), 8 paths, left–right tolerance 1 px, uniqueness 0.02, equiangular sub-pixel fit,
-    /// median on. The default range `[0, 63]` is a placeholder: set yours with
-    /// [`SgmParams::with_range`] or [`crate::estimate_range`].
+    /// Chosen on real WorldView-3 pairs (the DFC2019 JAX_068 development set, near-synchronic and
+    /// winter↔summer; ablation in BENCHMARKS.md) while keeping the procedural world's accuracy:
+    /// MGM, 5×5 census, `P1 = 16`, `P2 = 300` adapted to the gradient (`k = 0.02`: a jump costs
+    /// `P2 / 3` across an edge of 4 % of the image's range, `P1 + 1` across strong edges),
+    /// left–right tolerance 1 px, uniqueness 0.02, equiangular sub-pixel fit, median, speckle
+    /// regions under 200 px removed (1 px tolerance). The default range `[0, 63]` is a
+    /// placeholder: set yours with [`SgmParams::with_range`] or [`crate::estimate_range`].
     fn default() -> Self {
         Self {
             d_min: 0,
             d_max: 63,
             p1: 16,
-            p2: 200,
+            p2: 300,
             p2_adaptive: Some(0.02),
-            smoothing: None,
             census: CensusWindow::default(),
             aggregation: Aggregation::Mgm,
             paths: Paths::Eight,
@@ -112,7 +108,7 @@ impl Default for SgmParams {
             subpixel: true,
             median: true,
             speckle: Some(Speckle {
-                min_area: 50,
+                min_area: 200,
                 max_diff: 1.0,
             }),
             max_memory: None,
@@ -169,13 +165,6 @@ impl SgmParams {
             if t.is_nan() || t < 0.0 {
                 return Err(MatchError::InvalidParams(format!(
                     "left-right tolerance must be >= 0, got {t}"
-                )));
-            }
-        }
-        if let Some(s) = self.smoothing {
-            if !(s > 0.0 && s <= 10.0) {
-                return Err(MatchError::InvalidParams(format!(
-                    "census smoothing must be in (0, 10] px, got {s}"
                 )));
             }
         }
@@ -293,16 +282,8 @@ pub(crate) fn match_grey(
     let progress = Progress::new(steps, progress);
     let tick = || progress.tick();
 
-    let smoothed = params
-        .smoothing
-        .map(|s| (gaussian_smooth(lg, w, h, s), gaussian_smooth(rg, w, h, s)));
-    let (cl, cr) = match &smoothed {
-        Some((a, b)) => (&a[..], &b[..]),
-        None => (lg, rg),
-    };
-    let lc = census_transform(cl, w, h, params.census);
-    let rc = census_transform(cr, w, h, params.census);
-    drop(smoothed);
+    let lc = census_transform(lg, w, h, params.census);
+    let rc = census_transform(rg, w, h, params.census);
     build_cost_volume(
         &lc,
         &rc,
