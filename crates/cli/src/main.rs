@@ -469,6 +469,13 @@ struct EvalArgs {
     /// Omaha pairs whose ground-truth disparity exceeds this are dropped, pixels.
     #[arg(long, default_value_t = pipeline::eval::aggregate::OMAHA_MAX_DISPARITY)]
     omaha_max_disparity: f64,
+    /// Scoring rules: `release` = the benchmark's released evaluator exactly (per-score
+    /// registration on the masked truth, its NCC pyramid, _WATER.png 0 = water, truth nodata not
+    /// masked); `robust` = one registration on the whole truth, NaN for the truth's nodata, a
+    /// centre-preferring NCC with a minimum overlap (rows named "<method> [robust]").
+    #[arg(long, value_name = "release|robust", default_value = "release",
+          value_parser = pipeline::eval::Protocol::parse)]
+    protocol: pipeline::eval::Protocol,
     #[command(flatten)]
     sgm: SgmArgs,
     #[command(flatten)]
@@ -652,9 +659,14 @@ fn run(cli: Cli) -> Result<()> {
                     &a.output,
                 ),
             };
-            if let Some(n) = a.name {
-                opts.method_name = n;
+            match a.name {
+                Some(n) => opts.method_name = n,
+                None if a.protocol != pipeline::eval::Protocol::Release => {
+                    opts.method_name = format!("{} [{}]", opts.method_name, a.protocol.name());
+                }
+                None => {}
             }
+            opts.protocol = a.protocol;
             opts.save_dsm = a.save_dsm;
             opts.max_pairs = a.max_pairs;
             opts.aoi_rule = a

@@ -4,9 +4,11 @@
 use std::path::Path;
 
 use pipeline::eval::aggregate::{exceeds_disparity_limit, mean_std, median, SplitStat};
+use pipeline::eval::metrics::water_from_png;
 use pipeline::eval::records::{read_records, STATUS_DROPPED, STATUS_NO_OVERLAP, STATUS_SCORED};
 use pipeline::eval::{
-    aggregate, align, evaluate, score_dsm, AlignParams, EvalOptions, Exclusions, Method, PairRecord,
+    aggregate, align, evaluate, score_dsm, AlignParams, EvalOptions, Exclusions, Method,
+    PairRecord, Protocol, ScoreParams,
 };
 use pipeline::Silent;
 use raster::{Image, Mask};
@@ -42,14 +44,20 @@ fn alignment_recovers_a_known_shift_and_offset() {
             gt.get(sx as usize, sy as usize, 0) - 1.7
         }
     });
-    let a = align(&gt, &pred, &AlignParams::default()).unwrap();
-    assert_eq!((a.dx, a.dy), (3, -2), "{a:?}");
-    assert!((a.offset - 1.7).abs() < 1e-4, "offset {}", a.offset);
-    assert!(a.ncc.unwrap() > 0.999);
+    for params in [AlignParams::release(), AlignParams::robust()] {
+        let a = align(&gt, &pred, &params).unwrap();
+        assert_eq!((a.dx, a.dy), (3, -2), "{a:?}");
+        assert!((a.offset - 1.7).abs() < 1e-4, "offset {}", a.offset);
+        assert!(a.ncc.unwrap() > 0.999);
+    }
 
-    let s = score_dsm(&pred, &gt, &Exclusions::none(w, h), &AlignParams::default()).unwrap();
-    assert_eq!((s.dx, s.dy), (3, -2));
-    assert!(s.mae_filtered.unwrap() < 1e-4, "{s:?}");
+    let s = score_dsm(&pred, &gt, &Exclusions::none(w, h), &ScoreParams::default()).unwrap();
+    assert_eq!((s.filtered.dx, s.filtered.dy), (Some(3), Some(-2)));
+    assert_eq!(
+        s.raw, s.filtered,
+        "nothing masked: the same registration and MAE"
+    );
+    assert!(s.filtered.mae.unwrap() < 1e-4, "{s:?}");
     assert!(s.coverage.unwrap() > 0.8 && s.coverage.unwrap() < 1.0);
 
     // A larger shift is found through the pyramid (beyond one level's ±5 window).
@@ -61,9 +69,55 @@ fn alignment_recovers_a_known_shift_and_offset() {
             gt.get(sx as usize, sy as usize, 0) + 0.5
         }
     });
-    let a = align(&gt, &pred, &AlignParams::default()).unwrap();
-    assert_eq!((a.dx, a.dy), (-9, 7), "{a:?}");
-    assert!((a.offset + 0.5).abs() < 1e-4);
+    for params in [AlignParams::release(), AlignParams::robust()] {
+        let a = align(&gt, &pred, &params).unwrap();
+        assert_eq!((a.dx, a.dy), (-9, 7), "{a:?}");
+        assert!((a.offset + 0.5).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn each_score_registers_on_its_own_masked_truth() {
+    // The prediction is the truth raised by 1 m, and by 5 m over a "water" block: the release
+    // masks the water BEFORE registering, so the no-water offset is exactly −1 m and its MAE
+    // vanishes; registered once on the whole truth (robust), the offset is pulled by the water
+    // and every cell keeps an error.
+    let (w, h) = (160, 120);
+    let gt = synthetic_dsm(w, h);
+    let is_water = |x: usize, y: usize| (40..80).contains(&x) && (30..70).contains(&y);
+    let pred = Image::from_fn(w, h, |x, y| {
+        gt.get(x, y, 0) + if is_water(x, y) { 5.0 } else { 1.0 }
+    });
+    // _WATER.png: zero is water.
+    let png = Image::from_fn(w, h, |x, y| if is_water(x, y) { 0.0 } else { 255.0 });
+    let classes = Image::filled(w, h, 1, 2.0);
+    let ex = Exclusions::from_classes(&classes, Some(&water_from_png(&png)));
+    assert_eq!(ex.water.count(), 40 * 40);
+
+    let s = score_dsm(&pred, &gt, &ex, &Protocol::Release.score_params()).unwrap();
+    let (raw, nw) = (s.raw, s.no_water);
+    assert_eq!(
+        (raw.dx, raw.dy, nw.dx, nw.dy),
+        (Some(0), Some(0), Some(0), Some(0))
+    );
+    let share = raw.offset.unwrap() + 1.0;
+    assert!(
+        share < -0.27 && share > -0.4,
+        "raw offset pulled by the water: {raw:?}"
+    );
+    assert!((nw.offset.unwrap() + 1.0).abs() < 1e-5, "{nw:?}");
+    assert!(nw.mae.unwrap() < 1e-5 && raw.mae.unwrap() > 0.5, "{s:?}");
+    assert_eq!(
+        s.filtered, nw,
+        "no foliage: the filtered score is the no-water one"
+    );
+
+    let r = score_dsm(&pred, &gt, &ex, &Protocol::Robust.score_params()).unwrap();
+    assert_eq!(r.no_water.offset, r.raw.offset);
+    assert!(
+        (r.no_water.mae.unwrap() - share.abs()).abs() < 1e-4,
+        "{r:?}"
+    );
 }
 
 #[test]
@@ -74,16 +128,18 @@ fn scores_on_hand_made_rasters() {
     let pred = Image::new(3, 2, 1, vec![1.0, 2.0, n, 4.0, 9.0, 9.0]).unwrap();
     // Shared cells 0, 1, 3, 4: offset = (12 − 16) / 4 = −1; aligned 0, 1, 3, 8; errors 1, 1, 1, 3.
     let classes = Image::new(3, 2, 1, vec![9.0, 2.0, 2.0, 2.0, 5.0, 2.0]).unwrap();
+    // One registration for the three scores (robust protocol), so the masks only select cells.
+    let params = Protocol::Robust.score_params();
     let ex = Exclusions::from_classes(&classes, None);
-    let s = score_dsm(&pred, &gt, &ex, &AlignParams::default()).unwrap();
-    assert_eq!((s.dx, s.dy), (0, 0));
-    assert!((s.offset.unwrap() + 1.0).abs() < 1e-12);
-    assert!((s.mae_raw.unwrap() - 1.5).abs() < 1e-9, "{s:?}");
+    let s = score_dsm(&pred, &gt, &ex, &params).unwrap();
+    assert_eq!((s.filtered.dx, s.filtered.dy), (Some(0), Some(0)));
+    assert!((s.filtered.offset.unwrap() + 1.0).abs() < 1e-12);
+    assert!((s.raw.mae.unwrap() - 1.5).abs() < 1e-9, "{s:?}");
     // Without the water cell 0: errors 1, 1, 3.
-    assert!((s.mae_no_water.unwrap() - 5.0 / 3.0).abs() < 1e-9);
+    assert!((s.no_water.mae.unwrap() - 5.0 / 3.0).abs() < 1e-9);
     // Without water and foliage (cell 4): errors 1, 1.
-    assert!((s.mae_filtered.unwrap() - 1.0).abs() < 1e-9);
-    assert_eq!(s.cells, 2);
+    assert!((s.filtered.mae.unwrap() - 1.0).abs() < 1e-9);
+    assert_eq!(s.filtered.cells, 2);
     // 4 of the 5 finite ground-truth cells have a prediction.
     assert!((s.coverage.unwrap() - 0.8).abs() < 1e-12);
 
@@ -91,19 +147,13 @@ fn scores_on_hand_made_rasters() {
     // no-water over cells 3 and 4 (errors 1, 3).
     let water = Mask::new(3, 2, vec![false, true, false, false, false, false]).unwrap();
     let ex = Exclusions::from_classes(&classes, Some(&water));
-    let s = score_dsm(&pred, &gt, &ex, &AlignParams::default()).unwrap();
-    assert!((s.mae_no_water.unwrap() - 2.0).abs() < 1e-9);
-    assert!((s.mae_filtered.unwrap() - 1.0).abs() < 1e-9);
-    assert_eq!(s.cells, 1);
+    let s = score_dsm(&pred, &gt, &ex, &params).unwrap();
+    assert!((s.no_water.mae.unwrap() - 2.0).abs() < 1e-9);
+    assert!((s.filtered.mae.unwrap() - 1.0).abs() < 1e-9);
+    assert_eq!(s.filtered.cells, 1);
 
     // Size mismatches are errors, not panics.
-    assert!(score_dsm(
-        &Image::filled(2, 2, 1, 0.0),
-        &gt,
-        &ex,
-        &AlignParams::default()
-    )
-    .is_err());
+    assert!(score_dsm(&Image::filled(2, 2, 1, 0.0), &gt, &ex, &params).is_err());
 }
 
 #[test]
@@ -112,9 +162,12 @@ fn empty_overlap_is_a_clear_result() {
     let gt = Image::from_fn(w, h, |x, y| if x < 10 { (x + y) as f32 } else { f32::NAN });
     let pred = Image::from_fn(w, h, |x, y| if x >= 30 { (x * y) as f32 } else { f32::NAN });
     assert!(align(&gt, &pred, &AlignParams::default()).is_none());
-    let s = score_dsm(&pred, &gt, &Exclusions::none(w, h), &AlignParams::default()).unwrap();
+    let s = score_dsm(&pred, &gt, &Exclusions::none(w, h), &ScoreParams::default()).unwrap();
     assert!(s.no_overlap());
-    assert_eq!((s.mae_raw, s.mae_filtered, s.offset), (None, None, None));
+    assert_eq!(
+        (s.raw.mae, s.filtered.mae, s.filtered.offset),
+        (None, None, None)
+    );
     assert_eq!(s.coverage, Some(0.0));
     // Nothing at all, on either side.
     let empty = Image::filled(w, h, 1, f32::NAN);
@@ -122,7 +175,7 @@ fn empty_overlap_is_a_clear_result() {
         &empty,
         &empty,
         &Exclusions::none(w, h),
-        &AlignParams::default(),
+        &ScoreParams::default(),
     )
     .unwrap();
     assert!(s.no_overlap() && s.coverage.is_none());
@@ -142,6 +195,12 @@ fn row(split: &str, aoi: &str, method: &str, status: &str, mae: Option<f64>) -> 
         dx: Some(0),
         dy: Some(0),
         offset: Some(0.0),
+        dx_raw: Some(0),
+        dy_raw: Some(0),
+        offset_raw: Some(0.0),
+        dx_no_water: Some(0),
+        dy_no_water: Some(0),
+        offset_no_water: Some(0.0),
         pixels: 10,
         cells: 10,
         max_gt_disparity: None,
@@ -221,9 +280,15 @@ fn omaha_rule_drops_pairs_over_192_px() {
         exceeds_disparity_limit(&d(192.5), 192.0),
         (true, Some(192.5))
     );
-    assert!(exceeds_disparity_limit(&d(-200.0), 192.0).0);
+    // The release's rule is np.nanmax(d) > 192, signed: a large negative disparity stays, an
+    // infinite one goes, and so does a disparity that is NaN everywhere (its nanmax is NaN).
+    assert_eq!(
+        exceeds_disparity_limit(&d(-200.0), 192.0),
+        (false, Some(10.0))
+    );
+    assert!(exceeds_disparity_limit(&d(f32::INFINITY), 192.0).0);
     let none = Image::filled(2, 2, 1, f32::NAN);
-    assert_eq!(exceeds_disparity_limit(&none, 192.0), (false, None));
+    assert_eq!(exceeds_disparity_limit(&none, 192.0), (true, None));
 }
 
 fn make_world(dir: &Path, size: usize, seed: u64) -> String {
@@ -277,12 +342,15 @@ fn world_ground_truth_and_sgm_through_the_whole_chain() {
     assert!(cov_s > 0.2 && cov_s <= 1.0, "{s:?}");
     let text = r.table.to_text();
     println!("{text}");
-    assert!(text.contains("ground-truth disparity") && text.contains("SGM (census)"));
+    // The classical matcher's row is named by its aggregation (MGM by default).
+    let sgm_name = sgm_opts.method_name.clone();
+    assert!(sgm_name.ends_with("GM (census)"), "{sgm_name}");
+    assert!(text.contains("ground-truth disparity") && text.contains(&sgm_name));
     assert!(
         text.contains("Jacksonville") && text.contains("Omaha Diach.") && text.contains("World")
     );
     let md = std::fs::read_to_string(&r.markdown).unwrap();
-    assert!(md.contains("| SGM (census) |"), "{md}");
+    assert!(md.contains(&format!("| {sgm_name} |")), "{md}");
 
     // Resumability: rerunning both methods scores nothing and adds no row.
     let csv_before = std::fs::read(&r.csv).unwrap();

@@ -3,11 +3,42 @@
 //!
 //! Convention: the returned shift `(dx, dy)` is applied to the PREDICTION,
 //! `aligned(x, y) = pred(x − dx, y − dy) + offset` ([`apply`]), i.e. the predicted surface moves by
-//! `+dx` columns and `+dy` rows. NaN cells (no data) are ignored everywhere: the NCC of a shift is
-//! computed over the cells finite in both rasters, and a shift with too small an overlap is not
-//! considered.
+//! `+dx` columns and `+dy` rows. The released evaluator's `dsmr.compute_shift` returns the opposite
+//! sign (it samples `pred(x + dx, y + dy)`). NaN cells (no data) are ignored everywhere.
+//!
+//! Two schemes ([`Scheme`]):
+//! - [`Scheme::Release`] (the default) is the released evaluator's (`utils/dsmr.py`
+//!   `recursive_ncc`, `compute_ncc`, `mean_std`, `downsample2x_`) to the last rounding: the
+//!   pyramid halves while the smaller side exceeds 100 cells (512 → 256 → 128 → 64); a coarse
+//!   cell is the mean of the finite cells of the 2×2 block starting ONE cell down and right of
+//!   its own (`downsample2x_` writes every fine cell's block into `out[j // 2, i // 2]` and the
+//!   last write wins), clipped at the far edges; the estimate is floor-halved going down and
+//!   doubled going up; each level searches ±radius rows (outer) and columns (inner) in increasing
+//!   order of the release's shift and keeps the FIRST strict maximum; any overlap counts; the
+//!   moments are two-pass (means, then centred sums) in float64 in row-major order, as numba
+//!   computes them. The offset is `mean(gt) − mean(shifted pred)` over the common cells.
+//! - [`Scheme::Robust`], seasonstereo's earlier variant: aligned 2×2 blocks down to a smaller side
+//!   of `min_level_size`, a minimum overlap, and ties broken towards the level's centre.
 
 use raster::Image;
+
+/// The release's pyramid: halve while the smaller side exceeds this many cells.
+pub const RELEASE_PYRAMID_STOP: usize = 100;
+
+/// How the shift is searched.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scheme {
+    /// The released evaluator's multiscale NCC, bit for bit (see the module doc).
+    Release,
+    /// Aligned 2×2 pyramid, minimum overlap, ties towards the centre.
+    Robust {
+        /// The coarsest pyramid level has its smaller side at least this many cells.
+        min_level_size: usize,
+        /// A shift is scored only when at least this share of the cells finite in both rasters
+        /// at zero shift (and at least 16 cells) overlap.
+        min_overlap: f64,
+    },
+}
 
 /// How the shift is searched.
 #[derive(Clone, Debug, PartialEq)]
@@ -15,19 +46,33 @@ pub struct AlignParams {
     /// Search radius at every pyramid level, cells (the shift tried is within ±radius of the
     /// estimate brought from the coarser level).
     pub radius: i32,
-    /// The coarsest pyramid level has its smaller side at least this many cells.
-    pub min_level_size: usize,
-    /// A shift is scored only when at least this share of the cells finite in both rasters at
-    /// zero shift (and at least 16 cells) overlap.
-    pub min_overlap: f64,
+    pub scheme: Scheme,
 }
 
 impl Default for AlignParams {
+    /// The released evaluator's registration.
     fn default() -> Self {
+        AlignParams::release()
+    }
+}
+
+impl AlignParams {
+    /// The released evaluator's registration: ±5 cells per level, [`Scheme::Release`].
+    pub fn release() -> Self {
         AlignParams {
             radius: 5,
-            min_level_size: 32,
-            min_overlap: 0.25,
+            scheme: Scheme::Release,
+        }
+    }
+
+    /// seasonstereo's earlier registration: ±5 cells per level down to 32 cells, 25 % overlap.
+    pub fn robust() -> Self {
+        AlignParams {
+            radius: 5,
+            scheme: Scheme::Robust {
+                min_level_size: 32,
+                min_overlap: 0.25,
+            },
         }
     }
 }
@@ -119,7 +164,7 @@ impl Moments {
 }
 
 /// Halves a raster: each cell is the mean of the finite cells of its 2×2 block (NaN when none).
-fn downsample(image: &Image) -> Image {
+fn downsample_aligned(image: &Image) -> Image {
     let (w, h) = image.size();
     let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
     Image::from_fn(nw, nh, |x, y| {
@@ -172,22 +217,38 @@ fn search(
     best.map(|(s, _, _)| s)
 }
 
-/// Registers `pred` onto `gt` (same grid, single channel): the integer shift maximising the NCC,
-/// searched coarse to fine over a pyramid of 2×2 NaN-aware means (±`radius` at each level), then
-/// the vertical offset. Returns `None` when the two rasters share no finite cell at any shift
-/// tried (no overlap): there is nothing to align or to score. When the NCC is undefined (a flat
-/// surface), the shift stays (0, 0) and only the offset is estimated.
+/// Registers `pred` onto `gt` (same grid, single channel) by the integer shift maximising the NCC,
+/// searched coarse to fine (±`radius` at each level), then the vertical offset, by
+/// `params.scheme`. Returns `None` when the two rasters share no finite cell at the shift found
+/// (no overlap): there is nothing to align or to score. When the NCC is undefined everywhere (a
+/// flat surface), the shift stays (0, 0) and only the offset is estimated.
 pub fn align(gt: &Image, pred: &Image, params: &AlignParams) -> Option<Alignment> {
     assert_eq!(gt.size(), pred.size(), "align: rasters on different grids");
+    match params.scheme {
+        Scheme::Release => release::align(gt, pred, params.radius),
+        Scheme::Robust {
+            min_level_size,
+            min_overlap,
+        } => align_robust(gt, pred, params.radius, min_level_size, min_overlap),
+    }
+}
+
+fn align_robust(
+    gt: &Image,
+    pred: &Image,
+    radius: i32,
+    min_level_size: usize,
+    min_overlap: f64,
+) -> Option<Alignment> {
     let gt = gt.channel(0);
     let pred = pred.channel(0);
     let mut levels = vec![(gt.clone(), pred.clone())];
     loop {
         let (g, p) = levels.last().expect("one level at least");
-        if g.width().min(g.height()) / 2 < params.min_level_size.max(1) {
+        if g.width().min(g.height()) / 2 < min_level_size.max(1) {
             break;
         }
-        let next = (downsample(g), downsample(p));
+        let next = (downsample_aligned(g), downsample_aligned(p));
         levels.push(next);
     }
     let mut shift = (0i32, 0i32);
@@ -196,8 +257,8 @@ pub fn align(gt: &Image, pred: &Image, params: &AlignParams) -> Option<Alignment
             shift = (shift.0 * 2, shift.1 * 2);
         }
         let base = Moments::of(g, p, 0, 0).n;
-        let min_cells = ((base as f64 * params.min_overlap) as usize).max(16);
-        if let Some(s) = search(g, p, shift, params.radius, min_cells) {
+        let min_cells = ((base as f64 * min_overlap) as usize).max(16);
+        if let Some(s) = search(g, p, shift, radius, min_cells) {
             shift = s;
         }
     }
@@ -222,6 +283,204 @@ fn finish(shift: (i32, i32), m: &Moments) -> Alignment {
         offset: (m.sg - m.sp) / n,
         ncc: m.ncc(),
         overlap: m.n,
+    }
+}
+
+/// The released evaluator's registration (`utils/dsmr.py`), in its own sign convention: the
+/// shift `(sx, sy)` compares `gt(i, j)` with `pred(i + sx, j + sy)`.
+mod release {
+    use super::{Alignment, RELEASE_PYRAMID_STOP};
+    use raster::Image;
+
+    /// A single-channel raster in float64 (row-major), as numba sees the arrays.
+    struct Grid {
+        w: usize,
+        h: usize,
+        v: Vec<f64>,
+    }
+
+    impl Grid {
+        fn of(image: &Image) -> Grid {
+            let c = image.channel(0);
+            Grid {
+                w: c.width(),
+                h: c.height(),
+                v: c.data().iter().map(|&x| x as f64).collect(),
+            }
+        }
+
+        /// `valnan`: the cell (column i, row j) or NaN outside.
+        #[inline(always)]
+        fn at(&self, i: i64, j: i64) -> f64 {
+            if i >= 0 && j >= 0 && (i as usize) < self.w && (j as usize) < self.h {
+                self.v[j as usize * self.w + i as usize]
+            } else {
+                f64::NAN
+            }
+        }
+
+        /// `downsample2x_`: cell (I, J) of the result holds the NaN-aware mean of the block of
+        /// rows j..j+1 and columns i..i+1 (clipped), with j = min(2J + 1, h − 1) and
+        /// i = min(2I + 1, w − 1): the last fine cell written into it.
+        fn downsample(&self) -> Grid {
+            let (nw, nh) = (self.w.div_ceil(2), self.h.div_ceil(2));
+            let mut v = vec![f64::NAN; nw * nh];
+            for jj in 0..nh {
+                let j = (2 * jj + 1).min(self.h - 1) as i64;
+                for ii in 0..nw {
+                    let i = (2 * ii + 1).min(self.w - 1) as i64;
+                    let (mut s, mut n) = (0.0f64, 0usize);
+                    for k in 0..2 {
+                        for l in 0..2 {
+                            let t = self.at(i + k, j + l);
+                            if t.is_finite() {
+                                s += t;
+                                n += 1;
+                            }
+                        }
+                    }
+                    if n > 0 {
+                        v[jj * nw + ii] = s / n as f64;
+                    }
+                }
+            }
+            Grid { w: nw, h: nh, v }
+        }
+    }
+
+    /// `mean_std(u, v, sx, sy)`: (mean u, mean v, std u, std v, covariance, count) over the
+    /// cells finite in both, in two passes. `None` when no cell is common (the release divides
+    /// by zero there).
+    fn mean_std(u: &Grid, v: &Grid, sx: i64, sy: i64) -> Option<(f64, f64, f64, f64, f64, usize)> {
+        // Cells outside the overlap window read NaN from `v` and are skipped: the window keeps
+        // the row-major order of the sums, hence the roundings.
+        let (w, h) = (u.w as i64, u.h as i64);
+        let (i0, i1) = ((-sx).max(0), (v.w as i64 - sx).min(w));
+        let (j0, j1) = ((-sy).max(0), (v.h as i64 - sy).min(h));
+        if i0 >= i1 || j0 >= j1 {
+            return None;
+        }
+        let (mut mu, mut mv, mut count) = (0.0f64, 0.0f64, 0usize);
+        for j in j0..j1 {
+            let ur = &u.v[j as usize * u.w..];
+            let vr = &v.v[(j + sy) as usize * v.w..];
+            for i in i0..i1 {
+                let (a, b) = (ur[i as usize], vr[(i + sx) as usize]);
+                if a.is_finite() && b.is_finite() {
+                    mu += a;
+                    mv += b;
+                    count += 1;
+                }
+            }
+        }
+        if count == 0 {
+            return None;
+        }
+        let n = count as f64;
+        let (mu, mv) = (mu / n, mv / n);
+        let (mut su, mut sv, mut xc) = (0.0f64, 0.0f64, 0.0f64);
+        for j in j0..j1 {
+            let ur = &u.v[j as usize * u.w..];
+            let vr = &v.v[(j + sy) as usize * v.w..];
+            for i in i0..i1 {
+                let (a, b) = (ur[i as usize] - mu, vr[(i + sx) as usize] - mv);
+                if a.is_finite() && b.is_finite() {
+                    su += a * a;
+                    sv += b * b;
+                    xc += a * b;
+                }
+            }
+        }
+        Some((mu, mv, (su / n).sqrt(), (sv / n).sqrt(), xc / n, count))
+    }
+
+    /// `ncc`: NaN where undefined (no common cell, or a flat raster).
+    fn ncc(u: &Grid, v: &Grid, sx: i64, sy: i64) -> f64 {
+        match mean_std(u, v, sx, sy) {
+            Some((_, _, su, sv, xc, _)) => xc / (su * sv),
+            None => f64::NAN,
+        }
+    }
+
+    /// `compute_ncc`: rows outer, columns inner, the first strict maximum; the start when no
+    /// shift has a (non-NaN) NCC.
+    fn search(u: &Grid, v: &Grid, radius: i64, start: (i64, i64)) -> (i64, i64) {
+        let mut best = start;
+        let mut max = f64::NEG_INFINITY;
+        for sy in start.1 - radius..=start.1 + radius {
+            for sx in start.0 - radius..=start.0 + radius {
+                let c = ncc(u, v, sx, sy);
+                if c > max {
+                    best = (sx, sy);
+                    max = c;
+                }
+            }
+        }
+        best
+    }
+
+    /// `recursive_ncc` then `compute_shift(scaling=False)`, returned in seasonstereo's
+    /// convention (the shift negated).
+    pub(super) fn align(gt: &Image, pred: &Image, radius: i32) -> Option<Alignment> {
+        let mut levels = vec![(Grid::of(gt), Grid::of(pred))];
+        loop {
+            let (u, v) = levels.last().expect("one level at least");
+            if u.w.min(u.h) <= RELEASE_PYRAMID_STOP {
+                break;
+            }
+            let next = (u.downsample(), v.downsample());
+            levels.push(next);
+        }
+        // Going down the estimate is floor-halved from (0, 0), so the coarsest level starts at
+        // (0, 0); going up it is doubled.
+        let mut shift = (0i64, 0i64);
+        for (k, (u, v)) in levels.iter().enumerate().rev() {
+            if k + 1 < levels.len() {
+                shift = (shift.0 * 2, shift.1 * 2);
+            }
+            shift = search(u, v, radius as i64, shift);
+        }
+        let (u, v) = &levels[0];
+        let (mu, mv, su, sv, xc, count) = mean_std(u, v, shift.0, shift.1)?;
+        let ncc = xc / (su * sv);
+        Some(Alignment {
+            dx: -shift.0 as i32,
+            dy: -shift.1 as i32,
+            offset: mu - mv,
+            ncc: ncc.is_finite().then_some(ncc),
+            overlap: count,
+        })
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn downsample_averages_the_block_one_cell_further() {
+            // 5×3: coarse (0, 0) averages rows 1..2, columns 1..2; coarse (2, 1) the last
+            // column and row alone; NaN cells are left out.
+            let mut img = Image::from_fn(5, 3, |x, y| (10 * y + x) as f32);
+            img.set(2, 2, 0, f32::NAN);
+            let g = Grid::of(&img).downsample();
+            assert_eq!((g.w, g.h), (3, 2));
+            assert_eq!(g.v[0], (11.0 + 12.0 + 21.0) / 3.0);
+            assert_eq!(g.v[2], (14.0 + 24.0) / 2.0);
+            assert_eq!(g.v[5], 24.0);
+        }
+
+        #[test]
+        fn ties_keep_the_first_shift_in_scan_order() {
+            // Rows alternate 2, 0: every shift with an even row shift correlates exactly (NCC
+            // 1.0 to the last bit: the sums are of integers). The release keeps the first in
+            // its scan order (rows outer, columns inner, increasing): its (-5, -4), i.e. (5, 4)
+            // here; the robust scheme prefers the centre.
+            let gt = Image::from_fn(20, 20, |_, y| if y % 2 == 0 { 2.0 } else { 0.0 });
+            let a = super::super::align(&gt, &gt, &super::super::AlignParams::release()).unwrap();
+            assert_eq!((a.dx, a.dy), (5, 4), "{a:?}");
+            let r = super::super::align(&gt, &gt, &super::super::AlignParams::robust()).unwrap();
+            assert_eq!((r.dx, r.dy), (0, 0), "{r:?}");
+        }
     }
 }
 

@@ -11,8 +11,10 @@
 //! <SPLIT_DIR>/disparity/<stem>.iio    optional LiDAR-derived disparity (Omaha > 192 px rule)
 //! <RPC_DIR>/<IMAGEID>.json            SatNeRF/rpcm camera of each raw image (`root_dir`)
 //! <TRUTH_DIR>/<AOI>_DSM.tif           ground-truth DSM, float32 GeoTIFF in UTM
-//! <TRUTH_DIR>/<AOI>_CLS.tif           DFC2019 classes on the same grid (5 foliage, 9 water)
-//! <TRUTH_DIR>/<AOI>_WATER.png         optional water mask on the same grid (non-zero = water)
+//! <TRUTH_DIR>/<AOI>_CLS.tif           DFC2019 classes (5 foliage, 9 water); without it nothing
+//!                                     is masked (as in the release)
+//! <TRUTH_DIR>/<AOI>_WATER.png         optional water mask on the same grid, read only with a
+//!                                     _CLS.tif: ZERO = water (the release's convention)
 //! ```
 //!
 //! `<stem>` is `<LEFTID>-<RIGHTID>` (exactly one `-`); the pairs of a split are the `L/*.iio`

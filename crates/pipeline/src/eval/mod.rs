@@ -10,13 +10,17 @@
 //! 2. Inputs larger than [`EvalOptions::crop`] (1024) pixels are centre-cropped and both
 //!    homographies shifted accordingly ([`raster::geometry::crop_homography`]). A prediction file
 //!    may be given at the full rectified size (it is cropped) or at the crop's size.
-//! 3. The evaluation mask ([`camera::evaluation_mask`]: finite d > 0, 0 ≤ x − d < W, 32-px
-//!    border), then s2p's iterative triangulation with the full RPCs
+//! 3. The evaluation mask ([`protocol::evaluation_mask`]: finite d > 0, 32-px border, match
+//!    x − d in [32, W − 32)), then s2p's iterative triangulation with the full RPCs
 //!    ([`camera::triangulate_disparity`]).
 //! 4. Max-per-cell rasterisation on the ground-truth DSM's UTM grid ([`camera::rasterize_max`]).
-//! 5. Registration ([`align`]: integer shift by multiscale NCC, then vertical offset) and the
-//!    scores ([`metrics`]): MAE over all cells, without water, and without water and foliage
-//!    (`mae_filtered`, the headline number), coverage, shift and offset.
+//! 5. The scores ([`metrics`]): MAE over all cells, without water, and without water and foliage
+//!    (`mae_filtered`, the headline number), each after its own registration on the truth masked
+//!    for it ([`align`]: integer shift by multiscale NCC, then vertical offset); coverage beside.
+//!
+//! [`Protocol::Release`] (the default) follows the released evaluator in every rule, including
+//! its roundings where they decide a shift; [`Protocol::Robust`] is seasonstereo's deliberate
+//! variant (see [`protocol`]).
 //!
 //! Omaha pairs whose ground-truth disparity (`disparity/<stem>.iio`) exceeds 192 px are dropped
 //! (recorded with status `dropped_disparity_limit`, never aggregated). Aggregation
@@ -48,6 +52,7 @@ pub mod aggregate;
 pub mod align;
 pub mod layout;
 pub mod metrics;
+pub mod protocol;
 pub mod records;
 pub mod table;
 
@@ -58,13 +63,14 @@ use camera::{DsmGrid, DsmRaster, RpcModel, UtmZone};
 use matching::SgmParams;
 use raster::formats::{read_homographies, read_tiff};
 use raster::geometry::{crop, crop_homography};
-use raster::{Homography, Image, Mask};
+use raster::{Homography, Image};
 
 use crate::progress::{Progress, Silent};
 pub use aggregate::{aggregate, Table};
-pub use align::{align, AlignParams, Alignment};
+pub use align::{align, AlignParams, Alignment, Scheme};
 pub use layout::{AoiRule, PairFiles, Split, TruthFiles};
-pub use metrics::{score_dsm, DsmScores, Exclusions};
+pub use metrics::{score_dsm, DsmScores, Exclusions, Registration, Score, ScoreParams};
+pub use protocol::Protocol;
 pub use records::{PairRecord, RecordFile};
 
 /// Name of the per-pair CSV in the output folder.
@@ -139,7 +145,8 @@ pub struct EvalOptions {
     pub crop: usize,
     /// Omaha pairs with a ground-truth disparity above this are dropped.
     pub omaha_max_disparity: f64,
-    pub align: AlignParams,
+    /// The scoring rules: the released evaluator's by default.
+    pub protocol: Protocol,
 }
 
 impl EvalOptions {
@@ -163,7 +170,7 @@ impl EvalOptions {
             aoi_rule: AoiRule::default(),
             crop: 1024,
             omaha_max_disparity: aggregate::OMAHA_MAX_DISPARITY,
-            align: AlignParams::default(),
+            protocol: Protocol::Release,
         }
     }
 
@@ -202,53 +209,47 @@ pub struct EvalReport {
 /// The ground truth of one AOI, read once for all its pairs.
 pub struct Truth {
     pub aoi: String,
-    /// Heights, NaN where the truth has none.
+    /// Heights, NaN where the truth has none (the release protocol keeps a declared nodata value).
     pub dsm: Image,
     pub grid: DsmGrid,
     pub exclusions: Exclusions,
 }
 
 impl Truth {
-    /// Reads the truth of `aoi`; `zone` is the UTM zone of the AOI (from its cameras), used when
-    /// the DSM is a DFC2019 plain TIFF with its `.txt` georeference.
+    /// Reads the truth of `aoi` as the released evaluator does ([`Protocol::Release`]); `zone` is
+    /// the UTM zone of the AOI (from its cameras), used when the DSM is a DFC2019 plain TIFF with
+    /// its `.txt` georeference.
     pub fn read(files: &TruthFiles, aoi: &str, zone: UtmZone) -> Result<Truth> {
+        Truth::read_with(files, aoi, zone, Protocol::Release)
+    }
+
+    /// [`Truth::read`] under `protocol`: the release keeps a declared nodata value as a height
+    /// (it reads the raw values), resizes a class raster of another size and masks nothing
+    /// without a `_CLS.tif` (see [`read_exclusions`]).
+    pub fn read_with(
+        files: &TruthFiles,
+        aoi: &str,
+        zone: UtmZone,
+        protocol: Protocol,
+    ) -> Result<Truth> {
         let path = &files.dsm;
         let DsmRaster {
-            image: dsm, grid, ..
+            image: mut dsm,
+            grid,
+            nodata,
         } = camera::read_dsm(path, Some(zone))
             .with_context(|| format!("reading the ground-truth DSM {}", path.display()))?;
-        let (w, h) = dsm.size();
-        let cls = read_tiff(&files.cls)
-            .with_context(|| format!("reading the ground-truth classes {}", files.cls.display()))?
-            .image;
-        if cls.size() != (w, h) {
-            bail!(
-                "{}: the class raster is {}x{} but the DSM {} is {w}x{h}",
-                files.cls.display(),
-                cls.width(),
-                cls.height(),
-                path.display()
-            );
+        if !protocol.nodata_to_nan() && nodata.is_some_and(|v| !v.is_nan()) {
+            // `read_dsm` made the nodata cells NaN: the release reads them as they are.
+            dsm = read_tiff(path)
+                .with_context(|| format!("reading the ground-truth DSM {}", path.display()))?
+                .image
+                .channel(0);
         }
-        let water = if files.water.is_file() {
-            let m = raster::read_image(&files.water)
-                .with_context(|| format!("reading the water mask {}", files.water.display()))?;
-            if m.size() != (w, h) {
-                bail!(
-                    "{}: the water mask is {}x{} but the DSM {} is {w}x{h}",
-                    files.water.display(),
-                    m.width(),
-                    m.height(),
-                    path.display()
-                );
-            }
-            Some(Mask::from_image(&m))
-        } else {
-            None
-        };
+        let (w, h) = dsm.size();
         Ok(Truth {
             aoi: aoi.to_string(),
-            exclusions: Exclusions::from_classes(&cls, water.as_ref()),
+            exclusions: read_exclusions(files, path, (w, h), protocol)?,
             dsm,
             grid,
         })
@@ -442,6 +443,12 @@ fn evaluate_pair(
         dx: None,
         dy: None,
         offset: None,
+        dx_raw: None,
+        dy_raw: None,
+        offset_raw: None,
+        dx_no_water: None,
+        dy_no_water: None,
+        offset_no_water: None,
         pixels: 0,
         cells: 0,
         max_gt_disparity: None,
@@ -472,7 +479,12 @@ fn evaluate_pair(
     let rpc_right = read_rpc(&files.rpc_right, "right")?;
     if truth.as_ref().is_none_or(|t| t.aoi != files.aoi) {
         let zone = UtmZone::from_lonlat(rpc_left.lon_offset, rpc_left.lat_offset);
-        *truth = Some(Truth::read(&files.truth, &files.aoi, zone)?);
+        *truth = Some(Truth::read_with(
+            &files.truth,
+            &files.aoi,
+            zone,
+            opts.protocol,
+        )?);
     }
     let truth = truth.as_ref().expect("just read");
 
@@ -546,25 +558,33 @@ fn evaluate_pair(
         camera::write_dsm(&path, &dsm, &truth.grid)
             .with_context(|| format!("writing the predicted DSM {}", path.display()))?;
     }
-    let s = score_dsm(&dsm, &truth.dsm, &truth.exclusions, &opts.align)?;
+    let s = score_dsm(
+        &dsm,
+        &truth.dsm,
+        &truth.exclusions,
+        &opts.protocol.score_params(),
+    )?;
     if s.no_overlap() {
         record.status = records::STATUS_NO_OVERLAP.to_string();
     }
-    record.mae_raw = s.mae_raw;
-    record.mae_no_water = s.mae_no_water;
-    record.mae_filtered = s.mae_filtered;
+    record.mae_raw = s.raw.mae;
+    record.mae_no_water = s.no_water.mae;
+    record.mae_filtered = s.filtered.mae;
     record.coverage = s.coverage;
-    record.offset = s.offset;
-    if s.offset.is_some() {
-        record.dx = Some(s.dx);
-        record.dy = Some(s.dy);
-    }
-    record.cells = s.cells;
+    (record.dx, record.dy, record.offset) = (s.filtered.dx, s.filtered.dy, s.filtered.offset);
+    (record.dx_raw, record.dy_raw, record.offset_raw) = (s.raw.dx, s.raw.dy, s.raw.offset);
+    (
+        record.dx_no_water,
+        record.dy_no_water,
+        record.offset_no_water,
+    ) = (s.no_water.dx, s.no_water.dy, s.no_water.offset);
+    record.cells = s.filtered.cells;
     Ok(record)
 }
 
-/// The DSM of a (cropped) rectified disparity on `grid`: evaluation mask, triangulation with the
-/// RPCs, max per cell. Returns the DSM and the number of pixels triangulated.
+/// The DSM of a (cropped) rectified disparity on `grid`: the release's evaluation mask
+/// ([`protocol::evaluation_mask`]), triangulation with the RPCs, max per cell. Returns the DSM
+/// and the number of pixels triangulated.
 pub fn predicted_dsm(
     disparity: &Image,
     h_left: &Homography,
@@ -573,10 +593,58 @@ pub fn predicted_dsm(
     rpc_right: &RpcModel,
     grid: &DsmGrid,
 ) -> Result<(Image, usize)> {
-    let mask = camera::evaluation_mask(disparity);
+    let mask = protocol::evaluation_mask(disparity);
     let pixels = mask.count();
     let points =
         camera::triangulate_disparity(disparity, h_left, h_right, rpc_left, rpc_right, &mask)?;
     let dsm = camera::rasterize_max(&points, grid);
     Ok((dsm, pixels))
+}
+
+/// The exclusions of an AOI's truth of `(w, h)` cells, as the protocol reads them: without a
+/// `_CLS.tif` nothing is masked (the release masks only when it exists, `_WATER.png` included);
+/// a class raster of another size is resized (release) or refused (robust); `_WATER.png` marks
+/// water with zero and must be on the DSM's grid.
+fn read_exclusions(
+    files: &TruthFiles,
+    dsm: &Path,
+    (w, h): (usize, usize),
+    protocol: Protocol,
+) -> Result<Exclusions> {
+    if !files.cls.is_file() {
+        return Ok(Exclusions::none(w, h));
+    }
+    let mut cls = read_tiff(&files.cls)
+        .with_context(|| format!("reading the ground-truth classes {}", files.cls.display()))?
+        .image
+        .channel(0);
+    if cls.size() != (w, h) {
+        if !protocol.resize_classes() {
+            bail!(
+                "{}: the class raster is {}x{} but the DSM {} is {w}x{h}",
+                files.cls.display(),
+                cls.width(),
+                cls.height(),
+                dsm.display()
+            );
+        }
+        cls = protocol::resize_nearest(&cls, w, h);
+    }
+    let water = if files.water.is_file() {
+        let m = raster::read_image(&files.water)
+            .with_context(|| format!("reading the water mask {}", files.water.display()))?;
+        if m.size() != (w, h) {
+            bail!(
+                "{}: the water mask is {}x{} but the DSM {} is {w}x{h}",
+                files.water.display(),
+                m.width(),
+                m.height(),
+                dsm.display()
+            );
+        }
+        Some(metrics::water_from_png(&m))
+    } else {
+        None
+    };
+    Ok(Exclusions::from_classes(&cls, water.as_ref()))
 }

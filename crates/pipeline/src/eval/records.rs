@@ -26,15 +26,33 @@ pub struct PairRecord {
     pub mae_raw: Option<f64>,
     pub mae_no_water: Option<f64>,
     pub mae_filtered: Option<f64>,
+    /// Share of the truth's finite cells with an aligned prediction (not computed by the release).
     pub coverage: Option<f64>,
+    /// Registration of `mae_filtered`: shift applied to the prediction (cells;
+    /// `aligned(x, y) = pred(x − dx, y − dy) + offset`, the release's `compute_shift` returns
+    /// `(−dx, −dy)`) and vertical offset (metres).
     pub dx: Option<i32>,
     pub dy: Option<i32>,
     pub offset: Option<f64>,
+    /// Registration of `mae_raw` (the release registers each score on its own masked truth).
+    #[serde(default)]
+    pub dx_raw: Option<i32>,
+    #[serde(default)]
+    pub dy_raw: Option<i32>,
+    #[serde(default)]
+    pub offset_raw: Option<f64>,
+    /// Registration of `mae_no_water`.
+    #[serde(default)]
+    pub dx_no_water: Option<i32>,
+    #[serde(default)]
+    pub dy_no_water: Option<i32>,
+    #[serde(default)]
+    pub offset_no_water: Option<f64>,
     /// Pixels of the evaluation mask that were triangulated.
     pub pixels: usize,
     /// DSM cells of the filtered MAE.
     pub cells: usize,
-    /// Largest |d| of the ground-truth disparity, when there is one.
+    /// Largest d of the ground-truth disparity, when there is one.
     pub max_gt_disparity: Option<f64>,
 }
 
