@@ -7,7 +7,9 @@
 #   scripts/jax-dev-benchmark.sh [OUT] [-- extra reconstruct flags, e.g. --method sgm]
 #
 # Prints one line per pair and the means of the near-synchronic and cross-season groups; writes
-# OUT/results.tsv (default OUT: out/jax-dev).
+# OUT/results.tsv (default OUT: out/jax-dev). Then scores the same disparities with
+# `seasonstereo eval` (the released benchmark's protocol: centre crop, 32-px trim, highest point
+# per cell, no hole filling) and prints its table (OUT/eval/pairs.csv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-out/jax-dev}
@@ -39,3 +41,22 @@ done
 awk -F'\t' 'NR > 1 { m[$1] += $3; c[$1] += $4; n[$1]++; if (min[$1] == "" || $4 < min[$1]) min[$1] = $4 }
   END { for (g in n) printf "%s: mean MAE %.3f m, mean coverage %.1f %% (min %.1f %%) over %d pairs\n", g, m[g]/n[g], c[g]/n[g], min[g], n[g];
         if (n["near"] && n["cross"]) printf "cross/near MAE ratio %.2f\n", (m["cross"]/n["cross"])/(m["near"]/n["near"]) }' "$OUT/results.tsv"
+
+# The same disparities through the benchmark's evaluator: one split folder per group.
+rm -rf "$OUT/split-near" "$OUT/split-cross" "$OUT/pred" "$OUT/eval"
+mkdir -p "$OUT/pred"
+for group in near cross; do
+  pairs=$NEAR; [ $group = cross ] && pairs=$CROSS
+  SPLIT="$OUT/split-$group"
+  mkdir -p "$SPLIT/L" "$SPLIT/R" "$SPLIT/homography"
+  for p in $pairs; do
+    w="$OUT/${p}_work"
+    for sub in L R homography; do
+      for f in "$w/$sub"/*; do ln -sf "$(realpath "$f")" "$SPLIT/$sub/"; done
+    done
+    for f in "$w/disparity"/*; do ln -sf "$(realpath "$f")" "$OUT/pred/"; done
+  done
+done
+"$BIN" eval --split "near-synchronic=$OUT/split-near" --split "cross-season=$OUT/split-cross" \
+  --rpc-dir "$D/rpcs/ba" --truth-dir "$D/truth" --predictions "$OUT/pred" \
+  --name "seasonstereo (benchmark protocol)" -o "$OUT/eval" 2>/dev/null | grep -v '^$' | head -8

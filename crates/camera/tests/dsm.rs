@@ -113,16 +113,28 @@ fn dfc2019_truth_as_distributed_reads_with_its_txt_georeference() {
     let path = support::jax_dev("truth/JAX_068_DSM.tif");
     // The plain TIFF carries no georeference: the zone must come from somewhere.
     let msg = camera::read_dsm(&path, None).unwrap_err().to_string();
-    assert!(msg.contains("UTM zone") && msg.contains("JAX_068_DSM.txt"), "{msg}");
+    assert!(
+        msg.contains("UTM zone") && msg.contains("JAX_068_DSM.txt"),
+        "{msg}"
+    );
     let zone = UtmZone::new(17, true).unwrap();
     let dsm = camera::read_dsm(&path, Some(zone)).unwrap();
     let g = &dsm.grid;
-    assert_eq!((g.width, g.height, g.epsg, g.resolution), (512, 512, 32617, 0.5));
+    assert_eq!(
+        (g.width, g.height, g.epsg, g.resolution),
+        (512, 512, 32617, 0.5)
+    );
     // "E N size res" is the lower-left corner: the north edge is N + size·res.
     assert!((g.x0 - 436078.995946).abs() < 1e-6);
     assert!((g.y0 - (3357495.999923 + 256.0)).abs() < 1e-6);
     // LiDAR heights above the ellipsoid in Jacksonville: about −30 to +40 m, no NaN fill.
-    let finite: Vec<f32> = dsm.image.data().iter().copied().filter(|v| v.is_finite()).collect();
+    let finite: Vec<f32> = dsm
+        .image
+        .data()
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
     assert!(finite.len() > 500 * 500);
     let (lo, hi) = finite
         .iter()

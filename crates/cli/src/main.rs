@@ -339,7 +339,11 @@ fn census_window(s: &str) -> Result<matching::CensusWindow, String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("expected WxH, e.g. 9x7, got {s:?}"))?;
-    let parse = |v: &str| v.trim().parse::<usize>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+    };
     let c = matching::CensusWindow {
         width: parse(w)?,
         height: parse(h)?,

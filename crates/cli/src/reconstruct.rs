@@ -30,7 +30,8 @@ impl From<GriddingArg> for camera::Gridding {
 }
 
 #[derive(Args)]
-#[command(after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
+#[command(
+    after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
     altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W), \
     triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
     --work (default OUTPUT_work/: L/, R/, homography/, rectify/, disparity/), in the layout \
@@ -39,7 +40,8 @@ impl From<GriddingArg> for camera::Gridding {
     D=../shared/data/dfc2019-jax068-dev\n  seasonstereo reconstruct $D/images/JAX_068_006_RGB.tif \
     $D/images/JAX_068_020_RGB.tif --rpc-left $D/rpcs/ba/JAX_068_006_RGB.json --rpc-right \
     $D/rpcs/ba/JAX_068_020_RGB.json --like $D/truth/JAX_068_DSM.tif --truth \
-    $D/truth/JAX_068_DSM.tif -o out/jax/006-020.tif")]
+    $D/truth/JAX_068_DSM.tif -o out/jax/006-020.tif"
+)]
 pub struct ReconstructArgs {
     /// Left raw image: a GeoTIFF with its RPC (tag 50844), or any raster with --rpc-left.
     left: PathBuf,
@@ -179,11 +181,13 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
 }
 
 #[derive(Args)]
-#[command(after_help = "The benchmark's metric on any DSM already on the truth's grid (e.g. \
+#[command(
+    after_help = "The benchmark's metric on any DSM already on the truth's grid (e.g. \
     from `reconstruct --like`, `dsm --like`, or s2p): integer (dx, dy) shift within ±5 cells \
     maximising NCC, vertical offset b = mean(truth) − mean(DSM), MAE over cells where both exist \
     (filtered: without foliage 5 and water 9 of <AOI>_CLS.tif), coverage = share of truth cells \
-    with a value.")]
+    with a value."
+)]
 pub struct ScoreArgs {
     /// DSMs to score (GeoTIFF on the truth's grid).
     #[arg(required = true)]

@@ -107,21 +107,61 @@ struct Scan {
 /// The 8 directions of MGM as scans (see the module doc for the predecessors of each).
 const SCANS: [Scan; 8] = [
     // → : left and up.
-    Scan { rows: true, forward_lines: true, forward_pixels: true, axis: true },
+    Scan {
+        rows: true,
+        forward_lines: true,
+        forward_pixels: true,
+        axis: true,
+    },
     // ← : right and down.
-    Scan { rows: true, forward_lines: false, forward_pixels: false, axis: true },
+    Scan {
+        rows: true,
+        forward_lines: false,
+        forward_pixels: false,
+        axis: true,
+    },
     // ↓ : up and right.
-    Scan { rows: true, forward_lines: true, forward_pixels: false, axis: true },
+    Scan {
+        rows: true,
+        forward_lines: true,
+        forward_pixels: false,
+        axis: true,
+    },
     // ↑ : down and left.
-    Scan { rows: true, forward_lines: false, forward_pixels: true, axis: true },
+    Scan {
+        rows: true,
+        forward_lines: false,
+        forward_pixels: true,
+        axis: true,
+    },
     // ↘ : up-left and up-right.
-    Scan { rows: true, forward_lines: true, forward_pixels: true, axis: false },
+    Scan {
+        rows: true,
+        forward_lines: true,
+        forward_pixels: true,
+        axis: false,
+    },
     // ↖ : down-right and down-left.
-    Scan { rows: true, forward_lines: false, forward_pixels: true, axis: false },
+    Scan {
+        rows: true,
+        forward_lines: false,
+        forward_pixels: true,
+        axis: false,
+    },
     // ↙ : up-right and down-right.
-    Scan { rows: false, forward_lines: false, forward_pixels: true, axis: false },
+    Scan {
+        rows: false,
+        forward_lines: false,
+        forward_pixels: true,
+        axis: false,
+    },
     // ↗ : up-left and down-left.
-    Scan { rows: false, forward_lines: true, forward_pixels: true, axis: false },
+    Scan {
+        rows: false,
+        forward_lines: true,
+        forward_pixels: true,
+        axis: false,
+    },
 ];
 
 /// Aggregates `cost` into `sum` over the 8 MGM directions (`sum` is overwritten). `tick` is
@@ -188,6 +228,18 @@ struct SumPtr(*mut u16);
 unsafe impl Send for SumPtr {}
 unsafe impl Sync for SumPtr {}
 
+impl SumPtr {
+    /// The `n` values of pixel `p`.
+    ///
+    /// # Safety
+    /// `(p + 1) · n` must not exceed the volume's length, and no other live slice may cover
+    /// pixel `p`.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn pixel(&self, p: usize, n: usize) -> &mut [u16] {
+        std::slice::from_raw_parts_mut(self.0.add(p * n), n)
+    }
+}
+
 #[inline(always)]
 fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan: Scan) {
     let Dims {
@@ -206,7 +258,11 @@ fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan
     let sum_ptr = SumPtr(sum.as_mut_ptr());
     let sum_len = sum.len();
     for li in 0..n_lines {
-        let u = if scan.forward_lines { li } else { n_lines - 1 - li };
+        let u = if scan.forward_lines {
+            li
+        } else {
+            n_lines - 1 - li
+        };
         let has_prev = li > 0;
         let pred_u = if scan.forward_lines {
             u.wrapping_sub(1)
@@ -217,7 +273,11 @@ fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan
             // Sequential along the line.
             let mut last: Option<usize> = None;
             for vi in 0..len {
-                let v = if scan.forward_pixels { vi } else { len - 1 - vi };
+                let v = if scan.forward_pixels {
+                    vi
+                } else {
+                    len - 1 - vi
+                };
                 let p = pixel(u, v);
                 let c = &cost[p * n..(p + 1) * n];
                 let (before, rest) = cur.split_at_mut(v * np);
@@ -238,7 +298,7 @@ fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan
                     )
                 });
                 // SAFETY: p < w·h; this loop is the only writer.
-                let acc = unsafe { std::slice::from_raw_parts_mut(sum_ptr.0.add(p * n), n) };
+                let acc = unsafe { sum_ptr.pixel(p, n) };
                 debug_assert!((p + 1) * n <= sum_len);
                 cur_min[v] = step2(c, a, b, pen.p1, out, acc);
                 last = Some(v);
@@ -251,7 +311,6 @@ fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan
                 .zip(cur_min.par_chunks_mut(chunk))
                 .enumerate()
                 .for_each(|(ci, (cbuf, cmin))| {
-                    let sum_ptr = sum_ptr;
                     for (k, (out, m)) in cbuf.chunks_exact_mut(np).zip(cmin.iter_mut()).enumerate()
                     {
                         let v = ci * chunk + k;
@@ -269,8 +328,7 @@ fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan
                         let a = pred(v.checked_sub(1));
                         let b = pred(Some(v + 1));
                         // SAFETY: p < w·h and each pixel of this line belongs to one chunk.
-                        let acc =
-                            unsafe { std::slice::from_raw_parts_mut(sum_ptr.0.add(p * n), n) };
+                        let acc = unsafe { sum_ptr.pixel(p, n) };
                         debug_assert!((p + 1) * n <= sum_len);
                         *m = step2(c, a, b, pen.p1, out, acc);
                     }
@@ -346,7 +404,11 @@ mod tests {
                             }
                         }
                         for d in 0..n {
-                            let t = if qs.len() == 2 { terms[d] >> 1 } else { terms[d] };
+                            let t = if qs.len() == 2 {
+                                terms[d] >> 1
+                            } else {
+                                terms[d]
+                            };
                             l[p * n + d] = i64::from(cost[p * n + d]) + t;
                         }
                         remaining -= 1;

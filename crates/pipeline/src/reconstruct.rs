@@ -80,7 +80,10 @@ pub fn default_work_dir(output: &Path) -> PathBuf {
 }
 
 /// Runs rectify → match → DSM (→ score).
-pub fn reconstruct(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<ReconstructSummary> {
+pub fn reconstruct(
+    opts: &ReconstructOptions,
+    progress: &dyn Progress,
+) -> Result<ReconstructSummary> {
     let work = opts
         .work_dir
         .clone()

@@ -51,9 +51,15 @@ fn reconstruct_pair(l: &str, r: &str, fill: Option<usize>) -> (f64, f64, f64) {
     let work = dir.path().join("dsm_work");
     let stem = format!("JAX_068_{l}_RGB-JAX_068_{r}_RGB");
     for sub in ["L", "R", "disparity"] {
-        assert!(work.join(sub).join(format!("{stem}.iio")).is_file(), "{sub}");
+        assert!(
+            work.join(sub).join(format!("{stem}.iio")).is_file(),
+            "{sub}"
+        );
     }
-    assert!(work.join("homography").join(format!("{stem}.npz")).is_file());
+    assert!(work
+        .join("homography")
+        .join(format!("{stem}.npz"))
+        .is_file());
     let sc = s.scores.expect("scored against the truth");
     let cells = (s.dsm.grid.width * s.dsm.grid.height) as f64;
     (
@@ -104,12 +110,18 @@ fn dfc2019_truth_as_distributed_scores_a_dsm() {
     assert!((s.coverage.unwrap() - 1.0).abs() < 1e-12);
     let foliage = truth.exclusions.foliage.count();
     assert!(foliage > 5000, "class 5 cells: {foliage}");
-    assert_eq!(s.cells + foliage, truth.dsm.data().iter().filter(|v| v.is_finite()).count());
+    assert_eq!(
+        s.cells + foliage,
+        truth.dsm.data().iter().filter(|v| v.is_finite()).count()
+    );
     // A DSM on another grid is refused with the fix.
-    let other = camera::DsmGrid::new(truth.grid.x0 + 1.0, truth.grid.y0, 0.5, 512, 512, 32617)
-        .unwrap();
+    let other =
+        camera::DsmGrid::new(truth.grid.x0 + 1.0, truth.grid.y0, 0.5, 512, 512, 32617).unwrap();
     let off = dir.path().join("off.tif");
     camera::write_dsm(&off, &truth.dsm, &other).unwrap();
-    let msg = format!("{:#}", pipeline::score::score_dsm_file(&off, &truth).unwrap_err());
+    let msg = format!(
+        "{:#}",
+        pipeline::score::score_dsm_file(&off, &truth).unwrap_err()
+    );
     assert!(msg.contains("--like"), "{msg}");
 }
