@@ -267,6 +267,16 @@ fn aggregation_median_per_aoi_sample_std_and_average() {
         "{md}"
     );
     assert!(SplitStat::from_pairs(&[]).is_none());
+    // Coverage is printed beside the MAE (every constructed row covers 90 %).
+    assert_eq!(jax.coverage, Some(0.9));
+    assert!(
+        md.contains("| M (coverage) | 90.0 % | – | 90.0 % | – |  |"),
+        "{md}"
+    );
+    assert!(
+        text.contains("M (coverage)") && text.contains("90.0 %"),
+        "{text}"
+    );
 }
 
 #[test]

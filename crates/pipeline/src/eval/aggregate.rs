@@ -71,6 +71,9 @@ pub struct SplitStat {
     /// (AOI, median pair MAE, pairs) in AOI order.
     pub aois: Vec<(String, f64, usize)>,
     pub pairs: usize,
+    /// Mean coverage of the split's scored pairs (share of the truth's cells with a height),
+    /// when the records carry it: an MAE alone rewards holes.
+    pub coverage: Option<f64>,
 }
 
 impl SplitStat {
@@ -91,6 +94,7 @@ impl SplitStat {
             std,
             aois,
             pairs: pairs.len(),
+            coverage: None,
         })
     }
 }
@@ -155,16 +159,23 @@ pub fn aggregate(records: &[PairRecord]) -> Table {
             let splits: Vec<Option<SplitStat>> = columns
                 .iter()
                 .map(|c| {
-                    let pairs: Vec<(String, f64)> = records
+                    let scored: Vec<&PairRecord> = records
                         .iter()
                         .filter(|r| {
                             r.method == method
                                 && r.status == STATUS_SCORED
                                 && column_key(&r.split) == c.key
                         })
+                        .collect();
+                    let pairs: Vec<(String, f64)> = scored
+                        .iter()
                         .filter_map(|r| r.mae_filtered.map(|m| (r.aoi.clone(), m)))
                         .collect();
-                    SplitStat::from_pairs(&pairs)
+                    let coverages: Vec<f64> = scored.iter().filter_map(|r| r.coverage).collect();
+                    SplitStat::from_pairs(&pairs).map(|mut s| {
+                        s.coverage = mean_std(&coverages).0;
+                        s
+                    })
                 })
                 .collect();
             let means: Vec<f64> = splits.iter().flatten().map(|s| s.mean).collect();

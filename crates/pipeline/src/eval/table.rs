@@ -23,16 +23,24 @@ impl Table {
         let mut header = vec!["Method".to_string()];
         header.extend(self.columns.iter().map(|c| c.title.clone()));
         header.push("Avg. MAE".to_string());
-        let body = self
-            .rows
-            .iter()
-            .map(|r| {
-                let mut line = vec![r.method.clone()];
-                line.extend(r.splits.iter().map(|s| format_stat(s.as_ref())));
-                line.push(format_avg(r.average));
-                line
-            })
-            .collect();
+        let mut body = Vec::new();
+        for r in &self.rows {
+            let mut line = vec![r.method.clone()];
+            line.extend(r.splits.iter().map(|s| format_stat(s.as_ref())));
+            line.push(format_avg(r.average));
+            body.push(line);
+            // Coverage beside the MAE: the benchmark's number alone rewards holes.
+            if r.splits.iter().flatten().any(|s| s.coverage.is_some()) {
+                let mut cov = vec![format!("{} (coverage)", r.method)];
+                cov.extend(r.splits.iter().map(|s| {
+                    s.as_ref()
+                        .and_then(|s| s.coverage)
+                        .map_or("–".to_string(), |c| format!("{:.1} %", 100.0 * c))
+                }));
+                cov.push(String::new());
+                body.push(cov);
+            }
+        }
         (header, body)
     }
 
@@ -65,7 +73,7 @@ impl Table {
                 .join("  ")
         };
         let total = width.iter().sum::<usize>() + 2 * (n - 1);
-        let mut out = String::from("Altitude MAE (m), filtered (foliage and water masked): mean ± sample std over AOIs of the per-AOI median\n");
+        let mut out = String::from("Altitude MAE (m), filtered (foliage and water masked): mean ± sample std over AOIs of the per-AOI median; (coverage): mean share of the truth's cells with a height\n");
         out += &line(&header);
         out.push('\n');
         out += &"-".repeat(total);
@@ -83,7 +91,8 @@ impl Table {
         let mut out = String::from(
             "Altitude MAE (m) of the DSMs from the predicted disparities, foliage and water masked \
              (`mae_filtered`); per split: mean ± sample std over AOIs of the per-AOI median pair \
-             MAE; Avg. MAE: mean over the splits present.\n\n",
+             MAE; Avg. MAE: mean over the splits present; rows \"(coverage)\": mean share of the \
+             truth's cells with a height over the pairs (an MAE alone rewards holes).\n\n",
         );
         out += &format!("| {} |\n", header.join(" | "));
         out += &format!(
