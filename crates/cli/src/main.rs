@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use matching::{Paths, SgmParams};
-use pipeline::demo::{percent, pixels, run_demo, DemoOptions};
+use pipeline::demo::{metres, percent, pixels, run_demo, DemoOptions};
 use pipeline::predict::{predict_monster, predict_sgm, read_pair, write_disparity};
 use pipeline::progress::track;
 
@@ -53,7 +53,8 @@ enum Command {
     /// Turn a rectified disparity into a georeferenced DSM (RPC triangulation, highest point per
     /// cell), on a ground truth's grid or on a UTM grid of your choosing.
     Dsm(dsm::DsmArgs),
-    /// Run the whole chain on a procedural world and write an HTML report (offline, CPU, seconds).
+    /// SeasonStereo's story on a procedural world: four seasons, a synchronic and a winter ↔ summer
+    /// pair matched, triangulated to DSMs and scored against the truth; an HTML report (offline, CPU).
     Demo(DemoArgs),
     /// Altitude MAE of the DSMs from predicted disparities, as the benchmark's code computes it
     /// (RPC triangulation, max-per-cell DSM on the ground truth's grid, NCC registration, foliage
@@ -630,6 +631,19 @@ fn run(cli: Cli) -> Result<()> {
                 percent(v.bad1),
                 percent(v.bad2)
             );
+            for p in &s.pairs {
+                let d = &p.dsm.scores;
+                println!(
+                    "{} pair: disparity MAE {}, bad-2 {} (visible); DSM MAE {} filtered, {} all cells, coverage {} ({})",
+                    p.name,
+                    pixels(p.visible.mae),
+                    percent(p.visible.bad2),
+                    metres(d.mae_filtered),
+                    metres(d.mae_raw),
+                    percent(d.coverage),
+                    p.dsm.path.display()
+                );
+            }
             let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
             println!("report: {} ({total:.1} s)", s.report.display());
         }

@@ -109,6 +109,34 @@ fn demo_writes_a_report() {
         stdout.contains("MAE") && stdout.contains("report.html"),
         "{stdout}"
     );
+    assert!(
+        stdout.contains("synchronic pair:") && stdout.contains("winter ↔ summer pair:"),
+        "{stdout}"
+    );
+    // The report's `score` command scores the demo's DSMs as the demo did.
+    let truth = out.join("world/truth/WORLD_1_DSM.tif");
+    let dsm = out.join("dsm/cross_season.tif");
+    let o = seasonstereo(&[
+        "score",
+        dsm.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scored = String::from_utf8_lossy(&o.stdout);
+    let demo_line = stdout
+        .lines()
+        .find(|l| l.starts_with("winter ↔ summer pair:"))
+        .unwrap();
+    let mae = demo_line
+        .split("DSM MAE ")
+        .nth(1)
+        .and_then(|s| s.split(" m filtered").next())
+        .unwrap();
+    assert!(
+        scored.contains(&format!("MAE filtered {mae} m")),
+        "{scored} vs {demo_line}"
+    );
 }
 
 #[test]

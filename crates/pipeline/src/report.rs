@@ -74,7 +74,27 @@ impl Report {
     /// A histogram of `values` over [0, max] in `bins` bins, the last bin collecting everything above.
     pub fn histogram(&mut self, values: &[f32], max: f32, bins: usize, x_label: &str) -> &mut Self {
         self.body
-            .push_str(&svg_histogram(values, max, bins, x_label));
+            .push_str(&svg_histogram(&[("", values)], max, bins, x_label));
+        self
+    }
+
+    /// Histograms of several named series on the same bins (side-by-side bars, each series as a
+    /// share of its own finite values), with a legend.
+    pub fn histograms(
+        &mut self,
+        series: &[(&str, &[f32])],
+        max: f32,
+        bins: usize,
+        x_label: &str,
+    ) -> &mut Self {
+        self.body
+            .push_str(&svg_histogram(series, max, bins, x_label));
+        self
+    }
+
+    /// A block of preformatted text (commands), escaped.
+    pub fn code(&mut self, text: &str) -> &mut Self {
+        let _ = writeln!(self.body, "<pre><code>{}</code></pre>", escape(text));
         self
     }
 
@@ -107,36 +127,66 @@ impl Report {
 const STYLE: &str = "body{font-family:sans-serif;max-width:1400px;margin:2em auto;color:#222}\
 .row{display:flex;flex-wrap:wrap;gap:12px}figure{margin:0}img{width:320px;image-rendering:pixelated;border:1px solid #ccc}\
 figcaption{font-size:90%;text-align:center}table{border-collapse:collapse;margin:1em 0}\
-td,th{border:1px solid #bbb;padding:4px 10px;text-align:right}th{background:#eee}";
+td,th{border:1px solid #bbb;padding:4px 10px;text-align:right}th{background:#eee}\
+pre{background:#f4f4f4;border:1px solid #ddd;padding:8px;overflow-x:auto;font-size:90%}";
 
-fn svg_histogram(values: &[f32], max: f32, bins: usize, x_label: &str) -> String {
+fn svg_histogram(series: &[(&str, &[f32])], max: f32, bins: usize, x_label: &str) -> String {
     let bins = bins.max(1);
-    let mut counts = vec![0usize; bins];
-    for &v in values.iter().filter(|v| v.is_finite()) {
-        let i = if max > 0.0 {
-            ((v / max) * bins as f32) as usize
-        } else {
-            bins - 1
-        };
-        counts[i.min(bins - 1)] += 1;
-    }
-    let total = counts.iter().sum::<usize>().max(1);
-    let peak = *counts.iter().max().unwrap_or(&1).max(&1) as f64;
+    let shares: Vec<Vec<f64>> = series
+        .iter()
+        .map(|(_, values)| {
+            let mut counts = vec![0usize; bins];
+            for &v in values.iter().filter(|v| v.is_finite()) {
+                let i = if max > 0.0 {
+                    ((v / max) * bins as f32) as usize
+                } else {
+                    bins - 1
+                };
+                counts[i.min(bins - 1)] += 1;
+            }
+            let total = counts.iter().sum::<usize>().max(1) as f64;
+            counts.iter().map(|&c| c as f64 / total).collect()
+        })
+        .collect();
+    let peak = shares
+        .iter()
+        .flatten()
+        .copied()
+        .fold(0.0f64, f64::max)
+        .max(1e-12);
     let (w, h, left, bottom) = (600.0, 220.0, 50.0, 40.0);
     let bar = (w - left - 10.0) / bins as f64;
+    let n = series.len().max(1) as f64;
     let mut svg =
         format!("<svg width=\"{w}\" height=\"{h}\" xmlns=\"http://www.w3.org/2000/svg\">\n");
-    for (i, &c) in counts.iter().enumerate() {
-        let bh = (h - bottom - 10.0) * c as f64 / peak;
-        let _ = writeln!(
-            svg,
-            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#4a7bd0\"><title>{:.1}%</title></rect>",
-            left + i as f64 * bar,
-            h - bottom - bh,
-            (bar - 1.0).max(0.5),
-            bh,
-            100.0 * c as f64 / total as f64
-        );
+    for (k, ((name, _), shares)) in series.iter().zip(&shares).enumerate() {
+        let colour = SERIES_COLOURS[k % SERIES_COLOURS.len()];
+        let label = if name.is_empty() {
+            String::new()
+        } else {
+            format!("{}: ", escape(name))
+        };
+        for (i, &s) in shares.iter().enumerate() {
+            let bh = (h - bottom - 10.0) * s / peak;
+            let _ = writeln!(
+                svg,
+                "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"{colour}\"><title>{label}{:.1}%</title></rect>",
+                left + i as f64 * bar + k as f64 * bar / n,
+                h - bottom - bh,
+                (bar / n - 1.0 / n).max(0.5),
+                bh,
+                100.0 * s
+            );
+        }
+        if !name.is_empty() {
+            let _ = writeln!(
+                svg,
+                "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"12\" fill=\"{colour}\" text-anchor=\"end\">{}</text>",
+                w - 10.0,
+                20.0 + 16.0 * k as f64,
+                escape(name)
+            );
+        }
     }
     let _ = writeln!(
         svg,
@@ -145,7 +195,7 @@ fn svg_histogram(values: &[f32], max: f32, bins: usize, x_label: &str) -> String
 <text x=\"{mid}\" y=\"{t}\" font-size=\"12\" text-anchor=\"middle\">{}</text>\
 <text x=\"10\" y=\"20\" font-size=\"12\">share of pixels (peak {:.1}%)</text></svg>",
         escape(x_label),
-        100.0 * peak / total as f64,
+        100.0 * peak,
         y = h - bottom,
         x2 = w - 10.0,
         t = h - bottom + 20.0,
@@ -253,5 +303,32 @@ mod tests {
         assert!(html.contains("a &lt;b&gt;") && html.contains("x&amp;y"));
         // 0.1 and 0.2 fall in the first bin (2 of 3 finite values), 5.0 in the last.
         assert!(html.contains("<title>66.7%</title>") && html.contains("<title>33.3%</title>"));
+    }
+
+    #[test]
+    fn histograms_share_bins_and_code_is_escaped() {
+        let mut r = Report::new("t");
+        r.histograms(
+            &[("a", &[0.1, 0.1, 0.9]), ("b <2>", &[0.9, f32::NAN])],
+            1.0,
+            2,
+            "err",
+        )
+        .code("x < y && z");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.html");
+        r.write(&path).unwrap();
+        let html = std::fs::read_to_string(path).unwrap();
+        // Each series is a share of its own finite values, bars named by their series.
+        for t in [
+            "a: 66.7%",
+            "a: 33.3%",
+            "b &lt;2&gt;: 0.0%",
+            "b &lt;2&gt;: 100.0%",
+        ] {
+            assert!(html.contains(&format!("<title>{t}</title>")), "{t}");
+        }
+        assert_eq!(html.matches("<rect").count(), 4);
+        assert!(html.contains("<pre><code>x &lt; y &amp;&amp; z</code></pre>"));
     }
 }

@@ -1,0 +1,130 @@
+//! The demo end to end at its default size: the story it tells (four seasons, a synchronic and a
+//! winter ↔ summer pair, two DSMs scored against the truth) and its accuracy on the synchronic pair.
+
+use std::path::Path;
+
+use matching::SgmParams;
+use pipeline::demo::{run_demo, DemoOptions, DemoSummary};
+use pipeline::Silent;
+
+fn run(dir: &Path, size: usize) -> DemoSummary {
+    let opts = DemoOptions {
+        size,
+        seed: 1,
+        out_dir: dir.to_path_buf(),
+        sgm: SgmParams::default(),
+    };
+    run_demo(&opts, &Silent).unwrap()
+}
+
+/// Every `src="…"` of the page.
+fn sources(html: &str) -> Vec<String> {
+    html.split("src=\"")
+        .skip(1)
+        .map(|s| s.split('"').next().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn demo_tells_the_season_story_and_keeps_its_accuracy() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path();
+    let s = run(out, 512);
+
+    // The synchronic pair keeps the demo's acceptance on pixels visible in both views.
+    let v = &s.visible;
+    let (mae, bad2) = (v.mae.unwrap(), v.bad2.unwrap());
+    assert!(mae <= 0.25, "synchronic MAE {mae} px");
+    assert!(bad2 <= 0.015, "synchronic bad-2 {bad2}");
+    assert!(v.coverage.unwrap() > 0.9, "coverage {:?}", v.coverage);
+
+    // Both pairs have finite disparity and altitude scores; the DSMs are real rasters.
+    assert_eq!(s.pairs.len(), 2);
+    let (sync, cross) = (&s.pairs[0], &s.pairs[1]);
+    assert_eq!(sync.visible, s.visible);
+    for p in &s.pairs {
+        let d = &p.dsm.scores;
+        for (what, x) in [
+            ("disparity MAE", p.visible.mae),
+            ("bad-2", p.visible.bad2),
+            ("DSM MAE filtered", d.mae_filtered),
+            ("DSM MAE raw", d.mae_raw),
+            ("DSM coverage", d.coverage),
+        ] {
+            assert!(x.is_some_and(f64::is_finite), "{}: {what} {x:?}", p.name);
+        }
+        assert!(
+            d.coverage.unwrap() > 0.5,
+            "{}: coverage {:?}",
+            p.name,
+            d.coverage
+        );
+        assert!(d.cells > 1000, "{}: {} cells", p.name, d.cells);
+        let (ground, building) = (&p.dsm.by_class[0], &p.dsm.by_class[1]);
+        assert_eq!(
+            (ground.0.as_str(), building.0.as_str()),
+            ("ground", "building")
+        );
+        assert!(ground.1.is_some_and(f64::is_finite) && building.1.is_some_and(f64::is_finite));
+        let tif = raster::formats::read_tiff(&p.dsm.path).unwrap();
+        assert!(
+            tif.georef.is_some(),
+            "{} is georeferenced",
+            p.dsm.path.display()
+        );
+    }
+    // The synchronic DSM is accurate (the chain alone is exact to centimetres); the seasons make
+    // the cross-season pair harder, never easier by much.
+    let (ms, mc) = (
+        sync.dsm.scores.mae_filtered.unwrap(),
+        cross.dsm.scores.mae_filtered.unwrap(),
+    );
+    assert!(ms < 1.0, "synchronic DSM MAE {ms} m");
+    assert!(mc > 0.8 * ms, "cross-season {mc} m vs synchronic {ms} m");
+
+    // The report: four season thumbnails, both pairs, both DSMs, the table, the commands.
+    let html = std::fs::read_to_string(&s.report).unwrap();
+    for season in ["summer", "autumn", "winter", "spring"] {
+        let thumb = format!("seasons/left_{season}_thumb.png");
+        assert!(html.contains(&thumb), "report lacks {thumb}");
+    }
+    for needle in [
+        "left_winter.png",
+        "right_summer.png",
+        "dsm_truth.png",
+        "dsm_synchronic.png",
+        "dsm_cross_season.png",
+        "dsm_error_synchronic.png",
+        "dsm_error_cross_season.png",
+        "DSM MAE (filtered)",
+        "DSM coverage",
+        "<td>synchronic</td>",
+        "<td>winter ↔ summer</td>",
+        "<svg",
+        "Timings",
+        "seasonstereo reconstruct LEFT.tif RIGHT.tif",
+        "seasonstereo eval --world",
+        "seasonstereo score",
+    ] {
+        assert!(html.contains(needle), "report lacks {needle}");
+    }
+    let row = html
+        .split("<tr>")
+        .find(|r| r.starts_with("<td>winter ↔ summer</td>"))
+        .unwrap();
+    assert!(row.contains(&format!("{mc:.3} m")), "{row}");
+    for debug in ["Some(", "None", "{:?}", "Paths::", "Eight", "Mgm"] {
+        assert!(!html.contains(debug), "debug text {debug:?} in the report");
+    }
+    // Self-contained: every image lies beside the report, nothing is fetched.
+    let srcs = sources(&html);
+    assert!(srcs.len() >= 19, "{srcs:?}");
+    for src in &srcs {
+        assert!(!src.contains("://"), "{src}");
+        let img = raster::read_image(out.join(src)).unwrap();
+        assert!(img.width() > 0 && img.height() > 0, "{src}");
+    }
+    let links = html.replace("xmlns=\"http://www.w3.org/2000/svg\"", "");
+    assert!(!links.contains("http"), "the report links outside itself");
+    assert!(!html.contains("<script") && !html.contains("<link"));
+}
