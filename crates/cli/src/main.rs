@@ -441,7 +441,9 @@ struct EvalArgs {
     /// Folder of the cameras <IMAGEID>.json (SatNeRF/rpcm JSON, the `root_dir`).
     #[arg(long, value_name = "DIR", required_unless_present = "world")]
     rpc_dir: Option<PathBuf>,
-    /// Folder of the ground truth <AOI>_DSM.tif, <AOI>_CLS.tif, <AOI>_WATER.png.
+    /// Folder of the ground truth <AOI>_DSM.tif (GeoTIFF, or the DFC2019 plain TIFF with its
+    /// <AOI>_DSM.txt georeference beside it: the UTM zone is taken from the pair's cameras),
+    /// <AOI>_CLS.tif, <AOI>_WATER.png.
     #[arg(long, value_name = "DIR", required_unless_present = "world")]
     truth_dir: Option<PathBuf>,
     /// Compute the disparities with this method (or with --model)...

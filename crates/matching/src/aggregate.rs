@@ -407,6 +407,21 @@ fn sweep_chunk_impl(ctx: &RowCtx, x0: usize, s: &mut [u16], state: &mut [u16], m
     }
 }
 
+/// A seeded random cost volume (`w · h · n`, 0..63) and grey image (`w · h`, 0..1) for the
+/// aggregation tests of SGM and MGM.
+#[cfg(test)]
+pub(crate) fn random_inputs(w: usize, h: usize, n: usize, mut seed: u64) -> (Vec<u8>, Vec<f32>) {
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 33) as u32
+    };
+    let cost: Vec<u8> = (0..w * h * n).map(|_| (rnd() % 63) as u8).collect();
+    let grey: Vec<f32> = (0..w * h).map(|_| (rnd() % 100) as f32 / 100.0).collect();
+    (cost, grey)
+}
+
 /// Counts ticks and forwards progress as `(done, total)`.
 pub(crate) struct Progress<'a> {
     done: AtomicUsize,
@@ -494,15 +509,7 @@ mod tests {
     }
 
     fn check(w: usize, h: usize, n: usize, diagonals: bool, adapt: bool) {
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) as u32
-        };
-        let cost: Vec<u8> = (0..w * h * n).map(|_| (rnd() % 63) as u8).collect();
-        let grey: Vec<f32> = (0..w * h).map(|_| (rnd() % 100) as f32 / 100.0).collect();
+        let (cost, grey) = random_inputs(w, h, n, 12345);
         let pen = Penalties {
             p1: 7,
             p2: 90,

@@ -145,7 +145,7 @@ mod tests {
 
     #[test]
     fn window_bits() {
-        assert_eq!(CensusWindow::default().bits(), 62);
+        assert_eq!(CensusWindow::default().bits(), 24);
         assert!(CensusWindow::default().is_valid());
         assert!(!CensusWindow {
             width: 9,

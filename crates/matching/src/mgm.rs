@@ -423,15 +423,7 @@ mod tests {
     }
 
     fn check(w: usize, h: usize, n: usize, adapt: bool) {
-        let mut seed = 987u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) as u32
-        };
-        let cost: Vec<u8> = (0..w * h * n).map(|_| (rnd() % 63) as u8).collect();
-        let grey: Vec<f32> = (0..w * h).map(|_| (rnd() % 100) as f32 / 100.0).collect();
+        let (cost, grey) = crate::aggregate::random_inputs(w, h, n, 987);
         let pen = Penalties {
             p1: 7,
             p2: 90,
