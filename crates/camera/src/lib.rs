@@ -14,7 +14,8 @@ pub mod triangulate;
 pub mod utm;
 
 pub use dsm::{
-    fill_holes, rasterize, rasterize_max, read_dsm, write_dsm, DsmGrid, DsmRaster, Gridding,
+    fill_holes, median_filter, rasterize, rasterize_max, read_dsm, write_dsm, DsmGrid, DsmRaster,
+    Gridding,
 };
 pub use error::CameraError;
 pub use rpc::RpcModel;

@@ -214,3 +214,23 @@ fn hole_filling_takes_the_ground_side_and_never_extrapolates() {
     assert_eq!(m, 1, "only the roof hole is enclosed within one cell");
     assert!(short.get(4, 3, 0).is_nan());
 }
+
+#[test]
+fn median_filter_removes_a_spike_keeps_an_edge_and_the_holes() {
+    // Ground at 1 m on the left, a roof at 9 m from column 4, one wrong 30 m cell on the roof,
+    // one empty cell on the ground.
+    let (w, h) = (8, 6);
+    let mut dsm = Image::from_fn(w, h, |x, _| if x >= 4 { 9.0 } else { 1.0 });
+    dsm.set(6, 2, 0, 30.0);
+    dsm.set(1, 3, 0, f32::NAN);
+    let f = camera::median_filter(&dsm, 3);
+    assert_eq!(f.get(6, 2, 0), 9.0, "spike removed");
+    assert!(f.get(1, 3, 0).is_nan(), "holes stay holes");
+    for y in 0..h {
+        assert_eq!(f.get(3, y, 0), 1.0, "ground side of the edge at row {y}");
+        assert_eq!(f.get(4, y, 0), 9.0, "roof side of the edge at row {y}");
+    }
+    // A window of 1 changes nothing.
+    let same = camera::median_filter(&dsm, 1);
+    assert_eq!(same.get(6, 2, 0), 30.0);
+}

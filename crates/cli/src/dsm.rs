@@ -43,6 +43,10 @@ pub struct DsmArgs {
     /// them empty, as the benchmark's protocol does.
     #[arg(long, value_name = "CELLS", default_value_t = 0)]
     fill_holes: usize,
+    /// Median filter of the DSM over this odd window of cells, after any filling; 0 (default)
+    /// or 1: none.
+    #[arg(long, value_name = "CELLS", default_value_t = 0)]
+    median_filter: usize,
     /// Pixels trimmed on every side of the disparity (the benchmark trims 32).
     #[arg(long, default_value_t = 0)]
     border: usize,
@@ -88,6 +92,7 @@ pub fn run(a: DsmArgs) -> Result<()> {
         border: a.border,
         gridding: a.gridding.into(),
         fill_holes: (a.fill_holes > 0).then_some(a.fill_holes),
+        median_filter: (a.median_filter > 1).then_some(a.median_filter),
         output: a.output.clone(),
         compare: a.compare,
     })?;

@@ -84,6 +84,11 @@ pub struct ReconstructArgs {
     /// protocol does.
     #[arg(long, value_name = "CELLS", default_value_t = 40)]
     fill_holes: usize,
+    /// Median filter of the DSM over this odd window of cells, after the filling: removes the
+    /// roughness of single-pair matching on roofs and ground and keeps building edges (7 cells =
+    /// 3.5 m at 0.5 m); 0 or 1 disables it.
+    #[arg(long, value_name = "CELLS", default_value_t = 7)]
+    median_filter: usize,
     /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)
     /// with the benchmark's metric; needs --like on the same file.
     #[arg(long, value_name = "DSM", requires = "like")]
@@ -147,6 +152,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         grid,
         gridding: a.gridding.into(),
         fill_holes: (a.fill_holes > 0).then_some(a.fill_holes),
+        median_filter: (a.median_filter > 1).then_some(a.median_filter),
         border: 0,
         truth: a.truth,
     };

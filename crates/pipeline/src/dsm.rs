@@ -46,6 +46,9 @@ pub struct DsmOptions {
     /// Fill the holes enclosed by data within this many cells ([`camera::fill_holes`]);
     /// `None`: leave them empty (the benchmark's protocol).
     pub fill_holes: Option<usize>,
+    /// NaN-aware median filter over this odd window, after the filling
+    /// ([`camera::median_filter`]); `None`: none.
+    pub median_filter: Option<usize>,
     /// Output GeoTIFF.
     pub output: PathBuf,
     /// A reference DSM to compare with after alignment.
@@ -145,6 +148,12 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
     if let Some(distance) = opts.fill_holes {
         dsm = camera::fill_holes(&dsm, distance).0;
+    }
+    if let Some(window) = opts.median_filter {
+        if window % 2 == 0 {
+            bail!("the DSM median filter needs an odd window, got {window} cells");
+        }
+        dsm = camera::median_filter(&dsm, window);
     }
     write_dsm(&opts.output, &dsm, &grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;

@@ -49,6 +49,8 @@ pub struct ReconstructOptions {
     pub gridding: Gridding,
     /// Hole filling distance in cells (see [`camera::fill_holes`]); `None`: no filling.
     pub fill_holes: Option<usize>,
+    /// Median filter window of the DSM, cells (odd); `None`: none.
+    pub median_filter: Option<usize>,
     /// Pixels of the rectified disparity ignored at each border.
     pub border: usize,
     /// A ground-truth `<AOI>_DSM.tif` (its `_CLS.tif` beside it) to score the DSM against; the
@@ -141,6 +143,7 @@ pub fn reconstruct(
         border: opts.border,
         gridding: opts.gridding,
         fill_holes: opts.fill_holes,
+        median_filter: opts.median_filter,
         output: opts.output.clone(),
         compare: None,
     })?;

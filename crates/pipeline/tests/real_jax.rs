@@ -43,6 +43,7 @@ fn reconstruct_pair(l: &str, r: &str, fill: Option<usize>) -> (f64, f64, f64) {
         grid: GridChoice::Like(truth.clone()),
         gridding: Gridding::Median,
         fill_holes: fill,
+        median_filter: fill.map(|_| 7),
         border: 0,
         truth: Some(truth),
     };
