@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use pipeline::dsm::GridChoice;
 use pipeline::eval::metrics::DsmScores;
@@ -202,10 +202,10 @@ pub struct ScoreArgs {
     /// <AOI>_CLS.tif (and optional <AOI>_WATER.png) beside it.
     #[arg(long, value_name = "DSM")]
     truth: PathBuf,
-    /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (JAX), 21S (Buenos Aires),
-    /// 15N (Omaha).
-    #[arg(long, value_name = "ZONE", value_parser = parse_zone, default_value = "17N")]
-    utm_zone: camera::UtmZone,
+    /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (Jacksonville), 15N (Omaha),
+    /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
+    #[arg(long, value_name = "ZONE", value_parser = parse_zone)]
+    utm_zone: Option<camera::UtmZone>,
     /// Write the scores as JSON lines to this file too.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -226,7 +226,18 @@ fn parse_zone(s: &str) -> Result<camera::UtmZone, String> {
 }
 
 pub fn run_score(a: ScoreArgs) -> Result<()> {
-    let truth = pipeline::score::read_truth(&a.truth, a.utm_zone)?;
+    let zone = match a.utm_zone {
+        Some(z) => z,
+        None => camera::DsmGrid::read(&a.dsm[0], None)
+            .with_context(|| {
+                format!(
+                    "{}: cannot take the UTM zone from this DSM; give --utm-zone",
+                    a.dsm[0].display()
+                )
+            })?
+            .zone(),
+    };
+    let truth = pipeline::score::read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {
         let s = pipeline::score::score_dsm_file(path, &truth)?;

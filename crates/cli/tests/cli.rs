@@ -878,3 +878,79 @@ fn data_stages_teacher_curate_masks() {
         );
     }
 }
+
+#[test]
+fn reconstruct_a_real_pair_then_score_it_on_the_dfc2019_truth() {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/dfc2019-jax068-dev");
+    assert!(d.is_dir(), "needs {}", d.display());
+    let p = |rel: &str| d.join(rel).to_str().unwrap().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("003-004.tif");
+    let truth = p("truth/JAX_068_DSM.tif");
+    let o = seasonstereo(&[
+        "reconstruct",
+        &p("images/JAX_068_003_RGB.tif"),
+        &p("images/JAX_068_004_RGB.tif"),
+        "--rpc-left",
+        &p("rpcs/ba/JAX_068_003_RGB.json"),
+        "--rpc-right",
+        &p("rpcs/ba/JAX_068_004_RGB.json"),
+        "--like",
+        &truth,
+        "--truth",
+        &truth,
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    let line = stdout.lines().find(|l| l.starts_with("vs truth:")).unwrap();
+    let mae = line
+        .split("MAE filtered ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap();
+    assert!(mae.parse::<f64>().unwrap() < 1.6, "{line}");
+    assert!(dir.path().join("003-004_work/disparity").is_dir());
+    // `score` takes the UTM zone of the plain-TIFF truth from the DSM and agrees.
+    let json = dir.path().join("scores.jsonl");
+    let o = seasonstereo(&[
+        "score",
+        out.to_str().unwrap(),
+        "--truth",
+        &truth,
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scored = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        scored.contains(&format!("MAE filtered {mae} m")),
+        "{scored} vs {line}"
+    );
+    let v: serde_json::Value = serde_json::from_str(
+        std::fs::read_to_string(&json)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(v["coverage"].as_f64().unwrap() > 0.88, "{v}");
+    // --truth must be the grid given to --like.
+    let o = seasonstereo(&[
+        "reconstruct",
+        &p("images/JAX_068_003_RGB.tif"),
+        &p("images/JAX_068_004_RGB.tif"),
+        "--like",
+        &p("truth/JAX_068_CLS.tif"),
+        "--truth",
+        &truth,
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--like"), "{}", stderr(&o));
+}
