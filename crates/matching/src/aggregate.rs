@@ -95,9 +95,9 @@ fn step<const ASSIGN: bool>(
     m
 }
 
-/// Whether the AVX2 variants can run on this CPU.
+/// Whether the AVX2 variants can run on this CPU (SGM's and MGM's).
 #[inline]
-fn has_avx2() -> bool {
+pub(crate) fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         is_x86_feature_detected!("avx2")

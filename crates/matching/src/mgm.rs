@@ -23,7 +23,7 @@
 //!
 //! Memory is that of SGM: the `u8` cost and `u16` sum volumes plus line buffers.
 
-use crate::aggregate::{Dims, Penalties};
+use crate::aggregate::{has_avx2, Dims, Penalties};
 use rayon::prelude::*;
 
 /// The two predecessors' terms averaged (or the one that exists), plus the cost: the kernel of
@@ -184,16 +184,7 @@ pub(crate) fn aggregate_mgm(
     if w == 0 || h == 0 || n == 0 {
         return;
     }
-    let avx2 = {
-        #[cfg(target_arch = "x86_64")]
-        {
-            is_x86_feature_detected!("avx2")
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            false
-        }
-    };
+    let avx2 = has_avx2();
     for (i, scan) in SCANS.iter().enumerate() {
         let ticks = if i % 3 == 0 { h } else { 0 };
         run_scan(avx2, cost, sum, dims, pen, *scan);

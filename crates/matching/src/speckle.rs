@@ -35,26 +35,24 @@ pub fn remove_speckles(disp: &mut [f32], w: usize, h: usize, params: &Speckle) -
     if params.min_area <= 1 {
         return 0;
     }
-    const UNSEEN: u32 = u32::MAX;
-    let mut label = vec![UNSEEN; w * h];
+    let mut seen = vec![false; w * h];
     let mut stack: Vec<usize> = Vec::new();
     let mut region: Vec<usize> = Vec::new();
     let mut cleared = 0;
-    let mut next = 0u32;
     for start in 0..w * h {
-        if label[start] != UNSEEN || disp[start].is_nan() {
+        if seen[start] || disp[start].is_nan() {
             continue;
         }
         region.clear();
         stack.push(start);
-        label[start] = next;
+        seen[start] = true;
         while let Some(p) = stack.pop() {
             region.push(p);
             let (x, y) = (p % w, p / w);
             let d = disp[p];
             let mut visit = |q: usize| {
-                if label[q] == UNSEEN && (disp[q] - d).abs() <= params.max_diff {
-                    label[q] = next;
+                if !seen[q] && (disp[q] - d).abs() <= params.max_diff {
+                    seen[q] = true;
                     stack.push(q);
                 }
             };
@@ -77,7 +75,6 @@ pub fn remove_speckles(disp: &mut [f32], w: usize, h: usize, params: &Speckle) -
             }
             cleared += region.len();
         }
-        next = next.wrapping_add(1);
     }
     cleared
 }
