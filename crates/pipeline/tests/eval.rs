@@ -182,12 +182,8 @@ fn empty_overlap_is_a_clear_result() {
 }
 
 fn row(split: &str, aoi: &str, method: &str, status: &str, mae: Option<f64>) -> PairRecord {
+    let stem = format!("{aoi}_{}-{aoi}_x", mae.unwrap_or(-1.0));
     PairRecord {
-        split: split.into(),
-        stem: format!("{aoi}_{}-{aoi}_x", mae.unwrap_or(-1.0)),
-        aoi: aoi.into(),
-        method: method.into(),
-        status: status.into(),
         mae_raw: mae,
         mae_no_water: mae,
         mae_filtered: mae,
@@ -203,7 +199,7 @@ fn row(split: &str, aoi: &str, method: &str, status: &str, mae: Option<f64>) -> 
         offset_no_water: Some(0.0),
         pixels: 10,
         cells: 10,
-        max_gt_disparity: None,
+        ..PairRecord::unscored(split, &stem, aoi, method, status)
     }
 }
 

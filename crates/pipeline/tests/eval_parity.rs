@@ -482,27 +482,10 @@ fn table_aggregation_matches_generate_table() {
         };
         let m = mae.ok();
         records.push(PairRecord {
-            split: split.into(),
-            stem: format!("{aoi}_{i}-{aoi}_x"),
-            aoi: aoi.into(),
-            method: "M".into(),
-            status,
             mae_raw: m,
             mae_no_water: m,
             mae_filtered: m,
-            coverage: None,
-            dx: None,
-            dy: None,
-            offset: None,
-            dx_raw: None,
-            dy_raw: None,
-            offset_raw: None,
-            dx_no_water: None,
-            dy_no_water: None,
-            offset_no_water: None,
-            pixels: 0,
-            cells: 0,
-            max_gt_disparity: None,
+            ..PairRecord::unscored(split, &format!("{aoi}_{i}-{aoi}_x"), aoi, "M", &status)
         });
     }
     let table = aggregate(&records);

@@ -430,29 +430,13 @@ fn evaluate_pair(
         &opts.truth_dir,
         &opts.aoi_rule,
     )?;
-    let mut record = PairRecord {
-        split: split.name.clone(),
-        stem: stem.to_string(),
-        aoi: files.aoi.clone(),
-        method: opts.method_name.clone(),
-        status: records::STATUS_SCORED.to_string(),
-        mae_raw: None,
-        mae_no_water: None,
-        mae_filtered: None,
-        coverage: None,
-        dx: None,
-        dy: None,
-        offset: None,
-        dx_raw: None,
-        dy_raw: None,
-        offset_raw: None,
-        dx_no_water: None,
-        dy_no_water: None,
-        offset_no_water: None,
-        pixels: 0,
-        cells: 0,
-        max_gt_disparity: None,
-    };
+    let mut record = PairRecord::unscored(
+        &split.name,
+        stem,
+        &files.aoi,
+        &opts.method_name,
+        records::STATUS_SCORED,
+    );
 
     // The ground-truth disparity: needed by the Omaha rule and by Method::GroundTruth.
     let omaha = layout::is_omaha_split(&split.name);

@@ -57,6 +57,34 @@ pub struct PairRecord {
 }
 
 impl PairRecord {
+    /// A row of `split`, `stem`, `aoi`, `method` with `status` and no score yet (every score and
+    /// registration `None`, no pixel or cell counted).
+    pub fn unscored(split: &str, stem: &str, aoi: &str, method: &str, status: &str) -> Self {
+        PairRecord {
+            split: split.to_string(),
+            stem: stem.to_string(),
+            aoi: aoi.to_string(),
+            method: method.to_string(),
+            status: status.to_string(),
+            mae_raw: None,
+            mae_no_water: None,
+            mae_filtered: None,
+            coverage: None,
+            dx: None,
+            dy: None,
+            offset: None,
+            dx_raw: None,
+            dy_raw: None,
+            offset_raw: None,
+            dx_no_water: None,
+            dy_no_water: None,
+            offset_no_water: None,
+            pixels: 0,
+            cells: 0,
+            max_gt_disparity: None,
+        }
+    }
+
     /// The identity a rerun matches on.
     pub fn key(&self) -> (String, String, String) {
         (self.method.clone(), self.split.clone(), self.stem.clone())
