@@ -423,7 +423,8 @@ pub fn median_filter(dsm: &Image, window: usize) -> Image {
     Image::new(w, h, 1, out).expect("same size as the input")
 }
 
-/// Writes a DSM as a float32 GeoTIFF on `grid` (georeference, EPSG, nodata NaN), atomically.
+/// Writes a DSM as a float32 Cloud-Optimized GeoTIFF on `grid` (georeference, EPSG, nodata NaN,
+/// 256² tiles, overviews), atomically.
 pub fn write_dsm(path: impl AsRef<Path>, image: &Image, grid: &DsmGrid) -> Result<()> {
     let path = path.as_ref();
     if image.size() != (grid.width, grid.height) || image.channels() != 1 {
@@ -442,6 +443,6 @@ pub fn write_dsm(path: impl AsRef<Path>, image: &Image, grid: &DsmGrid) -> Resul
         nodata: Some(f64::NAN),
         rpc: None,
     };
-    write_geotiff(path, image, &meta)?;
+    raster::formats::write_cog(path, image, &meta)?;
     Ok(())
 }

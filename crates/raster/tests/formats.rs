@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use raster::formats::{
     read_homographies, read_image, read_npy, read_pfm, read_png, read_tiff, write_atomically,
     write_geotiff, write_homographies, write_image, write_npy, write_pfm, write_png, GeoReference,
-    GeoTiffMeta, PngDepth, RpcTag,
+    GeoTiffMeta, PngDepth, RpcTag, TiffReader,
 };
 use raster::{colormap, Homography, Image, Result};
 
@@ -524,6 +524,41 @@ fn tiff_planar_tiled_from_gdal() {
         [500_000.0, 10.0, 0.0, 4_600_000.0, 0.0, -10.0]
     );
     assert_eq!(g.epsg, Some(32631));
+}
+
+/// Windows read from striped (our writer), tiled chunky (COG) and tiled planar (GDAL) files equal
+/// the same crop of the whole image, at the edges too; a window outside the image is refused.
+#[test]
+fn tiff_windows_decode_only_what_they_cover_and_match_the_whole_image() {
+    let dir = tmp();
+    let img = sample_image(300, 270, 3);
+    let striped = dir.path().join("striped.tif");
+    write_geotiff(&striped, &img, &GeoTiffMeta::default()).unwrap();
+    let cog = dir.path().join("cog.tif");
+    raster::formats::write_cog(&cog, &img, &utm_meta()).unwrap();
+    let planar = dir.path().join("planar.tif");
+    let bytes: Vec<u8> = (0..PLANAR_TILED_I16.len() / 2)
+        .map(|i| u8::from_str_radix(&PLANAR_TILED_I16[2 * i..2 * i + 2], 16).unwrap())
+        .collect();
+    std::fs::write(&planar, bytes).unwrap();
+    for path in [&striped, &cog, &planar] {
+        let whole = read_tiff(path).unwrap().image;
+        let mut reader = TiffReader::open(path).unwrap();
+        assert_eq!(reader.size(), whole.size());
+        assert_eq!(reader.bands(), whole.channels());
+        let (w, h) = whole.size();
+        for (x, y, ww, hh) in [
+            (0, 0, w, h),
+            (3, 5, 7, 4),
+            (w - 9, h - 2, 9, 2),
+            (w / 2, 1, w / 3, h - 1),
+        ] {
+            let win = reader.read_window(x, y, ww, hh).unwrap();
+            assert_same(&win, &raster::geometry::crop(&whole, x, y, ww, hh).unwrap());
+        }
+        let msg = reader.read_window(w - 1, 0, 2, 1).unwrap_err().to_string();
+        assert!(msg.contains("not inside"), "{msg}");
+    }
 }
 
 // ---------------------------------------------------------------- PNG

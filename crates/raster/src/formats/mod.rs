@@ -4,6 +4,7 @@
 //! other crates are run under [`std::panic::catch_unwind`]); every writer goes through
 //! [`write_atomically`] so that a killed process never leaves a half-written output behind.
 
+pub mod cog;
 pub mod npy;
 pub mod npz;
 pub mod pfm;
@@ -18,11 +19,14 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::{Image, RasterError, Result};
 
+pub use self::cog::write_cog;
 pub use self::npy::{read_npy, write_npy};
 pub use self::npz::{read_homographies, write_homographies};
 pub use self::pfm::{read_pfm, write_pfm};
 pub use self::png::{decode_png, encode_png, read_png, write_png, PngDepth};
-pub use self::tiff::{read_tiff, write_geotiff, GeoRaster, GeoReference, GeoTiffMeta, RpcTag};
+pub use self::tiff::{
+    read_tiff, write_geotiff, GeoRaster, GeoReference, GeoTiffMeta, RpcTag, TiffReader,
+};
 
 /// The extensions [`read_image`] and [`write_image`] understand.
 pub const SUPPORTED_EXTENSIONS: &[&str] = &["npy", "iio", "tif", "tiff", "png", "pfm"];

@@ -6,7 +6,7 @@
 
 use std::fs::File;
 use std::io::{self, BufReader, Seek, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
 use tiff::encoder::colortype::ColorType;
@@ -16,7 +16,7 @@ use tiff::tags::{PhotometricInterpretation, PlanarConfiguration, SampleFormat, T
 use super::{alloc_samples, checked_samples, no_panic, write_atomically};
 use crate::{Image, RasterError, Result};
 
-const TAG_RPC: u16 = 50844;
+pub(super) const TAG_RPC: u16 = 50844;
 const KEY_MODEL_TYPE: u16 = 1024;
 const KEY_RASTER_TYPE: u16 = 1025;
 const KEY_GEOGRAPHIC_TYPE: u16 = 2048;
@@ -186,37 +186,163 @@ impl RpcTag {
 /// any number of bands (chunky or planar), striped or tiled, uncompressed, LZW, Deflate or
 /// PackBits.
 pub fn read_tiff(path: impl AsRef<Path>) -> Result<GeoRaster> {
-    let path = path.as_ref();
-    let file = File::open(path).map_err(|e| RasterError::io(path, e))?;
-    let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
-    no_panic(path, "TIFF", || {
-        let mut limits = Limits::default();
-        limits.ifd_value_size = 64 << 20;
-        limits.decoding_buffer_size = 1 << 30;
-        limits.intermediate_buffer_size = 1 << 30;
-        let mut dec = Decoder::new(BufReader::new(file))
-            .map_err(|e| tiff_err(path, e))?
-            .with_limits(limits);
-        let image = read_pixels(path, &mut dec, file_len)?;
-        let georef = read_georef(path, &mut dec)?;
-        let nodata = match find(path, &mut dec, Tag::GdalNodata)? {
-            Some(v) => Some(parse_nodata(path, v)?),
-            None => None,
-        };
-        let rpc = match find(path, &mut dec, Tag::Unknown(TAG_RPC))? {
-            Some(v) => {
-                let c = v.into_f64_vec().map_err(|e| tiff_err(path, e))?;
-                Some(RpcTag::from_coefficients(&c).map_err(|m| RasterError::format(path, m))?)
-            }
-            None => None,
-        };
-        Ok(GeoRaster {
-            image,
-            georef,
-            nodata,
-            rpc,
-        })
+    let mut reader = TiffReader::open(path)?;
+    let (w, h) = reader.size();
+    let image = reader.read_window(0, 0, w, h)?;
+    Ok(GeoRaster {
+        image,
+        georef: reader.georef,
+        nodata: reader.nodata,
+        rpc: reader.rpc,
     })
+}
+
+/// A (Geo)TIFF opened for reading windows of its first image: only the strips or tiles a window
+/// touches are decoded, so a whole satellite scene (35,000 × 40,000 px and more) is never held in
+/// memory. The metadata is read once, at opening.
+pub struct TiffReader {
+    path: PathBuf,
+    dec: Dec,
+    file_len: u64,
+    width: usize,
+    height: usize,
+    bands: usize,
+    /// Strip or tile size, pixels.
+    chunk: (usize, usize),
+    planar: bool,
+    pub georef: Option<GeoReference>,
+    /// The GDAL_NODATA value; NaN when the file says "nan".
+    pub nodata: Option<f64>,
+    /// The RPC camera model of a satellite image.
+    pub rpc: Option<RpcTag>,
+}
+
+impl TiffReader {
+    /// Opens `path` and reads its header, georeferencing, nodata and RPC tags.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let file = File::open(path).map_err(|e| RasterError::io(path, e))?;
+        let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
+        no_panic(path, "TIFF", || {
+            let mut limits = Limits::default();
+            limits.ifd_value_size = 64 << 20;
+            limits.decoding_buffer_size = 1 << 30;
+            limits.intermediate_buffer_size = 1 << 30;
+            let mut dec = Decoder::new(BufReader::new(file))
+                .map_err(|e| tiff_err(path, e))?
+                .with_limits(limits);
+            let (width, height, bands, chunk, planar) = layout(path, &mut dec)?;
+            let georef = read_georef(path, &mut dec)?;
+            let nodata = match find(path, &mut dec, Tag::GdalNodata)? {
+                Some(v) => Some(parse_nodata(path, v)?),
+                None => None,
+            };
+            let rpc = match find(path, &mut dec, Tag::Unknown(TAG_RPC))? {
+                Some(v) => {
+                    let c = v.into_f64_vec().map_err(|e| tiff_err(path, e))?;
+                    Some(RpcTag::from_coefficients(&c).map_err(|m| RasterError::format(path, m))?)
+                }
+                None => None,
+            };
+            Ok(TiffReader {
+                path: path.to_path_buf(),
+                dec,
+                file_len,
+                width,
+                height,
+                bands,
+                chunk,
+                planar,
+                georef,
+                nodata,
+                rpc,
+            })
+        })
+    }
+
+    /// `(width, height)` of the image, pixels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Number of bands.
+    pub fn bands(&self) -> usize {
+        self.bands
+    }
+
+    /// The metadata, to write another raster on the same grid with [`write_geotiff`].
+    pub fn meta(&self) -> GeoTiffMeta {
+        GeoTiffMeta {
+            georef: self.georef.clone(),
+            nodata: self.nodata,
+            rpc: self.rpc.clone(),
+        }
+    }
+
+    /// The `width × height` window at `(x0, y0)` as `(H, W, C)` f32; it must lie inside the
+    /// image.
+    pub fn read_window(
+        &mut self,
+        x0: usize,
+        y0: usize,
+        width: usize,
+        height: usize,
+    ) -> Result<Image> {
+        let path = self.path.clone();
+        let err = |m: String| RasterError::format(&path, m);
+        if width == 0 || height == 0 || x0 + width > self.width || y0 + height > self.height {
+            return Err(err(format!(
+                "window {width}x{height} at ({x0}, {y0}) is not inside the {}x{} image",
+                self.width, self.height
+            )));
+        }
+        // Compression ratios are bounded in practice (LZW/Deflate rarely beat 1000:1 on
+        // imagery); a header promising far more samples than the file could hold is corrupt.
+        let max = self.file_len.saturating_mul(4096).saturating_add(1 << 28);
+        let bands = self.bands;
+        let n = checked_samples(&path, width as u64, height as u64, bands as u64, max)?;
+        let mut out = alloc_samples(&path, n, f32::NAN)?;
+        let (w, h) = (self.width, self.height);
+        let (cw, ch) = self.chunk;
+        let across = w.div_ceil(cw);
+        let down = h.div_ceil(ch);
+        let (planes, spp) = if self.planar { (bands, 1) } else { (1, bands) };
+        let dec = &mut self.dec;
+        no_panic(&path, "TIFF", || {
+            for plane in 0..planes {
+                for r in y0 / ch..(y0 + height).div_ceil(ch) {
+                    for c in x0 / cw..(x0 + width).div_ceil(cw) {
+                        let index = (plane * down * across + r * across + c) as u32;
+                        let chunk = dec.read_chunk(index).map_err(|e| tiff_err(&path, e))?;
+                        let values = to_f32(chunk).ok_or_else(|| {
+                            err("unsupported TIFF sample format (need (u)int or float)".into())
+                        })?;
+                        let (cx, cy) = (c * cw, r * ch);
+                        let dw = cw.min(w - cx);
+                        let dh = ch.min(h - cy);
+                        // Chunks come back `dw` pixels wide (edge tiles cropped); the bottom tiles
+                        // of the planes after the first may come back uncropped in height, hence
+                        // `<`.
+                        if values.len() < dw * dh * spp {
+                            return Err(err(format!("TIFF chunk {index} is too short")));
+                        }
+                        let (xa, xb) = (cx.max(x0), (cx + dw).min(x0 + width));
+                        for y in cy.max(y0)..(cy + dh).min(y0 + height) {
+                            let src = &values[(y - cy) * dw * spp..(y - cy + 1) * dw * spp];
+                            let row = (y - y0) * width;
+                            for x in xa..xb {
+                                let o = (row + x - x0) * bands + plane;
+                                out[o..o + spp]
+                                    .copy_from_slice(&src[(x - cx) * spp..(x - cx + 1) * spp]);
+                            }
+                        }
+                    }
+                }
+            }
+            Ok(())
+        })?;
+        Image::new(width, height, bands, out).map_err(|e| err(e.to_string()))
+    }
 }
 
 fn tiff_err(path: &Path, e: tiff::TiffError) -> RasterError {
@@ -241,8 +367,8 @@ fn parse_nodata(path: &Path, v: tiff::decoder::ifd::Value) -> Result<f64> {
         .map_err(|_| RasterError::format(path, format!("unreadable GDAL_NODATA value '{s}'")))
 }
 
-/// Decodes every chunk (strip or tile, of every plane) into an `(H, W, C)` f32 buffer.
-fn read_pixels(path: &Path, dec: &mut Dec, file_len: u64) -> Result<Image> {
+/// `(width, height, bands, chunk size, planar)` of the first image, checked.
+fn layout(path: &Path, dec: &mut Dec) -> Result<(usize, usize, usize, (usize, usize), bool)> {
     let err = |m: String| RasterError::format(path, m);
     let (w, h) = dec.dimensions().map_err(|e| tiff_err(path, e))?;
     let bands = dec
@@ -265,47 +391,14 @@ fn read_pixels(path: &Path, dec: &mut Dec, file_len: u64) -> Result<Image> {
     if w == 0 || h == 0 || bands == 0 {
         return Err(err(format!("empty TIFF image ({w}x{h}x{bands})")));
     }
-    // Compression ratios are bounded in practice (LZW/Deflate rarely beat 1000:1 on imagery); a
-    // header promising far more samples than the file could hold is corrupt.
-    let max = file_len.saturating_mul(4096).saturating_add(1 << 28);
-    let n = checked_samples(path, w as u64, h as u64, bands as u64, max)?;
-    let mut out = alloc_samples(path, n, f32::NAN)?;
-
     let (cw, ch) = chunk_dims(path, dec)?;
-    let (w, h, cw, ch) = (w as usize, h as usize, cw as usize, ch as usize);
-    let across = w.div_ceil(cw);
-    let down = h.div_ceil(ch);
-    let (planes, spp) = if planar { (bands, 1) } else { (1, bands) };
-    let mut index: u32 = 0;
-    for plane in 0..planes {
-        for r in 0..down {
-            for c in 0..across {
-                let chunk = dec.read_chunk(index).map_err(|e| tiff_err(path, e))?;
-                index += 1;
-                let values = to_f32(chunk).ok_or_else(|| {
-                    err("unsupported TIFF sample format (need (u)int or float)".into())
-                })?;
-                let (x0, y0) = (c * cw, r * ch);
-                let dw = cw.min(w - x0);
-                let dh = ch.min(h - y0);
-                // Chunks come back `dw` pixels wide (edge tiles cropped); the bottom tiles of the planes
-                // after the first may come back uncropped in height, hence `<`.
-                if values.len() < dw * dh * spp {
-                    return Err(err(format!("TIFF chunk {} is too short", index - 1)));
-                }
-                for y in 0..dh {
-                    let src = &values[y * dw * spp..(y + 1) * dw * spp];
-                    let row = ((y0 + y) * w + x0) * bands;
-                    for x in 0..dw {
-                        for s in 0..spp {
-                            out[row + x * bands + plane + s] = src[x * spp + s];
-                        }
-                    }
-                }
-            }
-        }
-    }
-    Image::new(w, h, bands, out).map_err(|e| err(e.to_string()))
+    Ok((
+        w as usize,
+        h as usize,
+        bands,
+        (cw as usize, ch as usize),
+        planar,
+    ))
 }
 
 fn chunk_dims(path: &Path, dec: &mut Dec) -> Result<(u32, u32)> {
@@ -428,18 +521,18 @@ pub fn write_geotiff(path: impl AsRef<Path>, image: &Image, meta: &GeoTiffMeta) 
 }
 
 /// The extra tags of a GeoTIFF, computed before anything is written.
-struct GeoTags {
-    scale: Option<[f64; 3]>,
-    tiepoint: Option<[f64; 6]>,
-    transform: Option<[f64; 16]>,
-    keys: Option<Vec<u16>>,
-    doubles: Option<Vec<f64>>,
-    ascii: Option<String>,
-    nodata: Option<String>,
-    rpc: Option<Vec<f64>>,
+pub(super) struct GeoTags {
+    pub scale: Option<[f64; 3]>,
+    pub tiepoint: Option<[f64; 6]>,
+    pub transform: Option<[f64; 16]>,
+    pub keys: Option<Vec<u16>>,
+    pub doubles: Option<Vec<f64>>,
+    pub ascii: Option<String>,
+    pub nodata: Option<String>,
+    pub rpc: Option<Vec<f64>>,
 }
 
-fn geo_tags(meta: &GeoTiffMeta) -> std::result::Result<GeoTags, String> {
+pub(super) fn geo_tags(meta: &GeoTiffMeta) -> std::result::Result<GeoTags, String> {
     let mut t = GeoTags {
         scale: None,
         tiepoint: None,
