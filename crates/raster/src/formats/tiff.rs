@@ -204,12 +204,7 @@ pub struct TiffReader {
     path: PathBuf,
     dec: Dec,
     file_len: u64,
-    width: usize,
-    height: usize,
-    bands: usize,
-    /// Strip or tile size, pixels.
-    chunk: (usize, usize),
-    planar: bool,
+    layout: Layout,
     pub georef: Option<GeoReference>,
     /// The GDAL_NODATA value; NaN when the file says "nan".
     pub nodata: Option<f64>,
@@ -231,7 +226,7 @@ impl TiffReader {
             let mut dec = Decoder::new(BufReader::new(file))
                 .map_err(|e| tiff_err(path, e))?
                 .with_limits(limits);
-            let (width, height, bands, chunk, planar) = layout(path, &mut dec)?;
+            let layout = layout(path, &mut dec)?;
             let georef = read_georef(path, &mut dec)?;
             let nodata = match find(path, &mut dec, Tag::GdalNodata)? {
                 Some(v) => Some(parse_nodata(path, v)?),
@@ -248,11 +243,7 @@ impl TiffReader {
                 path: path.to_path_buf(),
                 dec,
                 file_len,
-                width,
-                height,
-                bands,
-                chunk,
-                planar,
+                layout,
                 georef,
                 nodata,
                 rpc,
@@ -262,12 +253,12 @@ impl TiffReader {
 
     /// `(width, height)` of the image, pixels.
     pub fn size(&self) -> (usize, usize) {
-        (self.width, self.height)
+        (self.layout.width, self.layout.height)
     }
 
     /// Number of bands.
     pub fn bands(&self) -> usize {
-        self.bands
+        self.layout.bands
     }
 
     /// The metadata, to write another raster on the same grid with [`write_geotiff`].
@@ -290,23 +281,26 @@ impl TiffReader {
     ) -> Result<Image> {
         let path = self.path.clone();
         let err = |m: String| RasterError::format(&path, m);
-        if width == 0 || height == 0 || x0 + width > self.width || y0 + height > self.height {
+        let Layout {
+            width: w,
+            height: h,
+            bands,
+            chunk: (cw, ch),
+            planar,
+        } = self.layout;
+        if width == 0 || height == 0 || x0 + width > w || y0 + height > h {
             return Err(err(format!(
-                "window {width}x{height} at ({x0}, {y0}) is not inside the {}x{} image",
-                self.width, self.height
+                "window {width}x{height} at ({x0}, {y0}) is not inside the {w}x{h} image"
             )));
         }
         // Compression ratios are bounded in practice (LZW/Deflate rarely beat 1000:1 on
         // imagery); a header promising far more samples than the file could hold is corrupt.
         let max = self.file_len.saturating_mul(4096).saturating_add(1 << 28);
-        let bands = self.bands;
         let n = checked_samples(&path, width as u64, height as u64, bands as u64, max)?;
         let mut out = alloc_samples(&path, n, f32::NAN)?;
-        let (w, h) = (self.width, self.height);
-        let (cw, ch) = self.chunk;
         let across = w.div_ceil(cw);
         let down = h.div_ceil(ch);
-        let (planes, spp) = if self.planar { (bands, 1) } else { (1, bands) };
+        let (planes, spp) = if planar { (bands, 1) } else { (1, bands) };
         let dec = &mut self.dec;
         no_panic(&path, "TIFF", || {
             for plane in 0..planes {
@@ -367,8 +361,19 @@ fn parse_nodata(path: &Path, v: tiff::decoder::ifd::Value) -> Result<f64> {
         .map_err(|_| RasterError::format(path, format!("unreadable GDAL_NODATA value '{s}'")))
 }
 
-/// `(width, height, bands, chunk size, planar)` of the first image, checked.
-fn layout(path: &Path, dec: &mut Dec) -> Result<(usize, usize, usize, (usize, usize), bool)> {
+/// How the first image's samples are stored.
+#[derive(Clone, Copy)]
+struct Layout {
+    width: usize,
+    height: usize,
+    bands: usize,
+    /// Strip or tile size, pixels.
+    chunk: (usize, usize),
+    planar: bool,
+}
+
+/// The checked layout of the first image.
+fn layout(path: &Path, dec: &mut Dec) -> Result<Layout> {
     let err = |m: String| RasterError::format(path, m);
     let (w, h) = dec.dimensions().map_err(|e| tiff_err(path, e))?;
     let bands = dec
@@ -392,13 +397,13 @@ fn layout(path: &Path, dec: &mut Dec) -> Result<(usize, usize, usize, (usize, us
         return Err(err(format!("empty TIFF image ({w}x{h}x{bands})")));
     }
     let (cw, ch) = chunk_dims(path, dec)?;
-    Ok((
-        w as usize,
-        h as usize,
+    Ok(Layout {
+        width: w as usize,
+        height: h as usize,
         bands,
-        (cw as usize, ch as usize),
+        chunk: (cw as usize, ch as usize),
         planar,
-    ))
+    })
 }
 
 fn chunk_dims(path: &Path, dec: &mut Dec) -> Result<(u32, u32)> {
