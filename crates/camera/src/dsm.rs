@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use raster::formats::{read_tiff, write_geotiff, GeoRaster, GeoReference, GeoTiffMeta};
+use raster::formats::{read_tiff, GeoRaster, GeoReference, GeoTiffMeta};
 use raster::Image;
 use rayon::prelude::*;
 
