@@ -290,26 +290,82 @@ pub fn rasterize_max(points: &Points, grid: &DsmGrid) -> Image {
 /// The points gridded on `grid` with `gridding`, NaN where no point falls. The result does not
 /// depend on the order of the points.
 pub fn rasterize(points: &Points, grid: &DsmGrid, gridding: Gridding) -> Image {
-    let mut cells = cells_of(points, grid);
-    let mut dsm = Image::filled(grid.width, grid.height, 1, f32::NAN);
-    let data = dsm.data_mut();
+    let cells = cells_of(points, grid);
+    let (heights, _) = grid_cells(cells, grid.width * grid.height, |i| i, gridding);
+    Image::new(grid.width, grid.height, 1, heights).expect("one value per cell")
+}
+
+/// The points of one tile gridded on the part of `grid` they cover (see [`rasterize_window`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GridWindow {
+    /// Column and row of the window's first cell in the full grid.
+    pub col: usize,
+    pub row: usize,
+    pub width: usize,
+    pub height: usize,
+    /// Height of each window cell, NaN where no point falls.
+    pub heights: Vec<f32>,
+    /// Number of points in each cell (saturating), what merges of overlapping windows weigh.
+    pub counts: Vec<u16>,
+}
+
+/// Like [`rasterize`], on the smallest window of `grid` holding every point, with the number of
+/// points per cell: a tile of a whole scene fills a few thousand cells of a grid of hundreds of
+/// millions. `None` when no point falls on the grid.
+pub fn rasterize_window(points: &Points, grid: &DsmGrid, gridding: Gridding) -> Option<GridWindow> {
+    let cells = cells_of(points, grid);
+    let (mut c0, mut r0, mut c1, mut r1) = (usize::MAX, usize::MAX, 0, 0);
+    for &(i, _) in &cells {
+        let (c, r) = (i % grid.width, i / grid.width);
+        (c0, r0, c1, r1) = (c0.min(c), r0.min(r), c1.max(c), r1.max(r));
+    }
+    if cells.is_empty() {
+        return None;
+    }
+    let (width, height) = (c1 - c0 + 1, r1 - r0 + 1);
+    let local = |i: usize| (i / grid.width - r0) * width + (i % grid.width - c0);
+    let (heights, counts) = grid_cells(cells, width * height, local, gridding);
+    Some(GridWindow {
+        col: c0,
+        row: r0,
+        width,
+        height,
+        heights,
+        counts,
+    })
+}
+
+/// Heights and point counts of `len` cells from `(cell, altitude)` pairs, `index` mapping a
+/// cell to its position.
+fn grid_cells(
+    mut cells: Vec<(usize, f32)>,
+    len: usize,
+    index: impl Fn(usize) -> usize,
+    gridding: Gridding,
+) -> (Vec<f32>, Vec<u16>) {
+    let mut heights = vec![f32::NAN; len];
+    let mut counts = vec![0u16; len];
     match gridding {
         Gridding::Max => {
             for (i, alt) in cells {
-                let v = &mut data[i];
+                let k = index(i);
+                let v = &mut heights[k];
                 if v.is_nan() || alt > *v {
                     *v = alt;
                 }
+                counts[k] = counts[k].saturating_add(1);
             }
         }
         Gridding::Median => {
             cells.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
             for run in cells.chunk_by(|a, b| a.0 == b.0) {
-                data[run[0].0] = run[run.len() / 2].1;
+                let k = index(run[0].0);
+                heights[k] = run[run.len() / 2].1;
+                counts[k] = run.len().min(u16::MAX as usize) as u16;
             }
         }
     }
-    dsm
+    (heights, counts)
 }
 
 /// Fills the holes of a DSM that are enclosed by data, ground-first: the usual holes of a

@@ -16,7 +16,7 @@ use pipeline::Progress;
 
 use crate::SgmArgs;
 
-fn parse_shard(s: &str) -> Result<Shard, String> {
+pub(crate) fn parse_shard(s: &str) -> Result<Shard, String> {
     Shard::parse(s).map_err(|e| e.to_string())
 }
 

@@ -6,6 +6,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use pipeline::dsm::GridChoice;
 use pipeline::eval::metrics::DsmScores;
+use pipeline::reconstruct::tile::TileStatus;
 use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
 
 use crate::{Method, NetworkArgs, RectifyArgs, SgmArgs};
@@ -57,8 +58,38 @@ pub struct ReconstructArgs {
     #[arg(long, value_name = "JSON")]
     rpc_right: Option<PathBuf>,
     /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
-    #[arg(long, value_name = "X,Y,W,H", value_parser = RectifyArgs::parse_roi)]
+    #[arg(long, value_name = "X,Y,W,H", value_parser = RectifyArgs::parse_roi, conflicts_with = "roi_lonlat")]
     roi: Option<camera::rectify::Roi>,
+    /// Region of interest as lon/lat bounds (degrees): the left image's pixels that see it at
+    /// any altitude of the scene.
+    #[arg(long, value_name = "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX", value_parser = parse_lonlat, allow_hyphen_values = true)]
+    roi_lonlat: Option<[f64; 4]>,
+    /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
+    /// (an affine rectification holds only over a small area) and the tiles are merged.
+    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    tile: usize,
+    /// Overlap collar around each tile, pixels: context for the matcher; only the points of
+    /// each tile's core are kept, so the collar never shows as a seam.
+    #[arg(long, value_name = "PX", default_value_t = 64)]
+    collar: usize,
+    /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
+    /// and only as many tiles as fit run at once (at most one per core).
+    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
+    max_memory: f64,
+    /// Run only the tiles ≡ I mod N of the plan (Slurm: $SLURM_ARRAY_TASK_ID/N; Kubernetes:
+    /// $JOB_COMPLETION_INDEX/N), all shards sharing one --work folder; the shard that finds
+    /// every tile finished writes the DSM (or run --merge at the end).
+    #[arg(long, value_name = "I/N", value_parser = crate::dataset::parse_shard, default_value = "0/1")]
+    shard: pipeline::dataset_build::dataset::Shard,
+    /// Only assemble the DSM from the tiles in --work (after sharded runs); fails naming the
+    /// missing tiles.
+    #[arg(long)]
+    merge: bool,
+    /// Keep every tile's rectified pair and disparity in --work (L/, R/, homography/,
+    /// disparity/, the layout `seasonstereo eval` reads); off by default, as they take ~30 bytes
+    /// per pixel.
+    #[arg(long)]
+    keep_intermediates: bool,
     /// Altitudes of the scene MIN:MAX, metres. Default: min_alt/max_alt of the JSON cameras, else
     /// the RPCs' altitude offset ± scale.
     #[arg(long, value_name = "MIN:MAX", value_parser = RectifyArgs::parse_alt_range, allow_hyphen_values = true)]
@@ -145,6 +176,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         rpc_left: a.rpc_left,
         rpc_right: a.rpc_right,
         roi: a.roi,
+        roi_lonlat: a.roi_lonlat,
         alt_range: a.alt_range,
         matcher,
         output: a.output.clone(),
@@ -155,35 +187,98 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         median_filter: (a.median_filter > 1).then_some(a.median_filter),
         border: 0,
         truth: a.truth,
+        tile: a.tile,
+        collar: a.collar,
+        max_memory: gib_to_bytes(a.max_memory)?,
+        shard: a.shard,
+        merge_only: a.merge,
+        keep_intermediates: a.keep_intermediates,
     };
     let s = reconstruct(&opts, progress)?;
-    let r = &s.rectified;
+    let count = |st| s.count(st);
+    let range = s
+        .disparity_range()
+        .map_or("-".into(), |(lo, hi)| format!("{lo}:{hi} px"));
+    println!(
+        "tiles: {} of {} px (collar {} px): {} done, {} empty, {} failed; {} run now ({} at once, \
+         largest ~{:.2} GiB), disparity {range}, {:.1} % matched",
+        s.records.len() + s.missing.len(),
+        a.tile,
+        a.collar,
+        count(TileStatus::Done),
+        count(TileStatus::Empty),
+        count(TileStatus::Failed),
+        s.ran,
+        s.in_flight,
+        s.tile_memory as f64 / (1u64 << 30) as f64,
+        100.0 * s.matched().unwrap_or(0.0),
+    );
+    for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
+        eprintln!(
+            "warning: tile {} failed (rerun the same command to retry it): {}",
+            r.tile.id,
+            r.error.as_deref().unwrap_or("?")
+        );
+    }
+    let Some(dsm) = &s.dsm else {
+        println!(
+            "{} tiles belong to other shards and are not finished (first: {}); the DSM is written \
+             by the run that finds every tile done, or by `seasonstereo reconstruct ... --merge`",
+            s.missing.len(),
+            s.missing[0]
+        );
+        return Ok(());
+    };
     let times: Vec<String> = s
         .seconds
         .iter()
         .map(|(k, t)| format!("{k} {t:.1} s"))
         .collect();
+    let cells = (dsm.grid.width * dsm.grid.height) as f64;
     println!(
-        "wrote {} ({}x{} cells of {} m, EPSG:{}, {:.1} % measured, {:.1} % with a height) from pair {} ({}x{} px, disparity {}:{} px, {:.1} % matched); {}",
+        "wrote {} ({}x{} cells of {} m, EPSG:{}, {:.1} % measured, {:.1} % with a height) from \
+         pair {}; {}",
         a.output.display(),
-        s.dsm.grid.width,
-        s.dsm.grid.height,
-        s.dsm.grid.resolution,
-        s.dsm.grid.epsg,
-        100.0 * s.dsm.measured_cells as f64 / (s.dsm.grid.width * s.dsm.grid.height) as f64,
-        100.0 * s.dsm.filled_cells as f64 / (s.dsm.grid.width * s.dsm.grid.height) as f64,
-        r.stem,
-        r.size.0,
-        r.size.1,
-        r.disparity_range.0,
-        r.disparity_range.1,
-        100.0 * s.matched,
+        dsm.grid.width,
+        dsm.grid.height,
+        dsm.grid.resolution,
+        dsm.grid.epsg,
+        100.0 * dsm.measured_cells as f64 / cells,
+        100.0 * dsm.filled_cells as f64 / cells,
+        s.stem,
         times.join(", ")
     );
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", format_scores(sc));
     }
     Ok(())
+}
+
+/// A positive number of GiB in bytes.
+fn gib_to_bytes(gib: f64) -> Result<u64> {
+    if !(gib.is_finite() && gib > 0.0) {
+        bail!("--max-memory must be a positive number of GiB, got {gib}");
+    }
+    Ok((gib * (1u64 << 30) as f64) as u64)
+}
+
+/// `LON_MIN,LAT_MIN,LON_MAX,LAT_MAX`.
+fn parse_lonlat(s: &str) -> Result<[f64; 4], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .map_err(|e| format!("{t:?} in {s:?}: {e}"))
+        })
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [a, b, c, d] if c > a && d > b => Ok([a, b, c, d]),
+        _ => Err(format!(
+            "expected LON_MIN,LAT_MIN,LON_MAX,LAT_MAX with MIN < MAX, e.g. \
+             -81.665,30.348,-81.660,30.352, got {s:?}"
+        )),
+    }
 }
 
 #[derive(Args)]

@@ -144,17 +144,9 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
             epsg,
         } => grid_for(&points, *resolution, *bounds, *epsg)?,
     };
-    let mut dsm = rasterize(&points, &grid, opts.gridding);
+    let dsm = rasterize(&points, &grid, opts.gridding);
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
-    if let Some(distance) = opts.fill_holes {
-        dsm = camera::fill_holes(&dsm, distance).0;
-    }
-    if let Some(window) = opts.median_filter {
-        if window % 2 == 0 {
-            bail!("the DSM median filter needs an odd window, got {window} cells");
-        }
-        dsm = camera::median_filter(&dsm, window);
-    }
+    let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
     write_dsm(&opts.output, &dsm, &grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
     let comparison = match &opts.compare {
@@ -168,6 +160,25 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
         grid,
         comparison,
     })
+}
+
+/// The post-processing of a gridded DSM: hole filling within `fill_holes` cells
+/// ([`camera::fill_holes`]), then a NaN-aware median filter over an odd `median_filter` window.
+pub fn finish_dsm(
+    mut dsm: Image,
+    fill_holes: Option<usize>,
+    median_filter: Option<usize>,
+) -> Result<Image> {
+    if let Some(distance) = fill_holes {
+        dsm = camera::fill_holes(&dsm, distance).0;
+    }
+    if let Some(window) = median_filter {
+        if window % 2 == 0 {
+            bail!("the DSM median filter needs an odd window, got {window} cells");
+        }
+        dsm = camera::median_filter(&dsm, window);
+    }
+    Ok(dsm)
 }
 
 /// A grid at `resolution` over `bounds`, or over the points' UTM extent.

@@ -101,7 +101,7 @@ fn read_raw(path: &Path, which: &str) -> Result<(Image, Option<RpcModel>)> {
 }
 
 /// The camera of one view: the JSON when given, else the TIFF tag.
-fn camera_of(
+pub(crate) fn camera_of(
     image_path: &Path,
     tag: Option<RpcModel>,
     json: Option<&Path>,
@@ -121,7 +121,7 @@ fn camera_of(
 
 /// The altitude range: the user's, else the union of the JSONs' `min_alt`/`max_alt`, else the
 /// intersection of the RPCs' validity ranges (offset ± scale, usually far wider than the scene).
-fn altitude_range(
+pub(crate) fn altitude_range(
     user: Option<(f64, f64)>,
     left: &RpcModel,
     right: &RpcModel,
@@ -155,7 +155,7 @@ fn altitude_range(
 }
 
 /// The file name of `path` without its extension.
-fn file_stem(path: &Path) -> Result<String> {
+pub(crate) fn file_stem(path: &Path) -> Result<String> {
     path.file_stem()
         .and_then(|s| s.to_str())
         .map(str::to_owned)

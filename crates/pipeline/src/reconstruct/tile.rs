@@ -1,0 +1,286 @@
+//! One tile of a scene: rectified on its own from the RPCs (an affine rectification holds only
+//! over a small area), matched, triangulated, and gridded on the scene's grid. Only the points
+//! seen from the tile's core are kept, so the collar gives the matcher context without two tiles
+//! claiming the same pixels.
+
+use std::path::Path;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use camera::rectify::{rectification, warp_nan, Rectification};
+use camera::{rasterize_window, triangulate_disparity, DsmGrid, GridWindow, Gridding, RpcModel};
+use matching::SgmParams;
+use raster::formats::{write_homographies, write_npy};
+use raster::{Homography, Image, Mask};
+use serde::{Deserialize, Serialize};
+
+use super::plan::Tile;
+use super::raw::RawImage;
+use crate::dsm::valid_pixels;
+use crate::predict::{predict_monster, predict_sgm};
+use crate::Silent;
+use nn::infer::MonsterPredictor;
+
+/// The matcher every tile uses.
+pub enum TileMatcher {
+    /// Census + MGM/SGM over each tile's range from the cameras.
+    Classical(SgmParams),
+    /// MonSter++, loaded once; tiles take turns.
+    Network(Mutex<MonsterPredictor>),
+}
+
+/// What every tile shares.
+pub struct Scene<'a> {
+    pub left: &'a RawImage,
+    pub right: &'a RawImage,
+    pub rpc_left: &'a RpcModel,
+    pub rpc_right: &'a RpcModel,
+    pub alt_range: (f64, f64),
+    pub matcher: &'a TileMatcher,
+    pub grid: &'a DsmGrid,
+    pub gridding: Gridding,
+    /// Pixels of each rectified disparity ignored at its borders.
+    pub border: usize,
+    /// Keep each tile's rectified pair and disparity under this folder, in the layout `eval`
+    /// reads.
+    pub keep: Option<&'a Path>,
+    /// Pair name: the files of a single-tile scene are `<stem>`, those of a tile
+    /// `<stem>_<tile id>`.
+    pub stem: &'a str,
+    pub single_tile: bool,
+}
+
+/// How a tile ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TileStatus {
+    /// Points gridded.
+    Done,
+    /// Nothing to grid (no texture, clouds, water, outside the right image): not an error.
+    Empty,
+    /// An error; the message is in the record, and a rerun tries the tile again.
+    Failed,
+}
+
+/// The record of one tile (`tiles/<id>.json`), written when it ends.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TileRecord {
+    pub tile: Tile,
+    pub status: TileStatus,
+    pub error: Option<String>,
+    pub seconds: f64,
+    /// Disparity search range of its rectification, pixels.
+    pub disparity_range: Option<(i32, i32)>,
+    /// `(width, height)` of its rectified pair.
+    pub rectified_size: Option<(usize, usize)>,
+    /// Share of the rectified left pixels with a disparity.
+    pub matched: Option<f64>,
+    /// Points triangulated from its core.
+    pub points: usize,
+    /// Estimated peak memory, bytes.
+    pub memory_bytes: u64,
+    /// Its cells on the scene grid: column, row, width, height (`tiles/<id>.tif` holds them).
+    pub cells: Option<(usize, usize, usize, usize)>,
+}
+
+/// The local rectification of a tile.
+pub fn tile_rectification(scene: &Scene, tile: &Tile) -> Result<Rectification> {
+    rectification(
+        scene.rpc_left,
+        scene.rpc_right,
+        tile.extended,
+        scene.alt_range,
+    )
+    .with_context(|| format!("rectifying tile {} ({:?})", tile.id, tile.extended))
+}
+
+/// Peak memory of a tile, bytes: the matcher's volumes ([`matching::memory_bytes`]; MonSter++
+/// is bounded by its own budget), both rectified images, the raw windows, the disparity, the
+/// points and the mask.
+pub fn tile_memory(rect: &Rectification, tile: &Tile, bands: usize, matcher: &TileMatcher) -> u64 {
+    let (w, h) = rect.size;
+    let (lo, hi) = rect.disparity_range;
+    let n = (hi - lo + 1).max(1) as usize;
+    let matching = match matcher {
+        TileMatcher::Classical(_) => matching::memory_bytes(w, h, n) as u64,
+        TileMatcher::Network(p) => p.lock().map(|p| p.memory_budget).unwrap_or(0),
+    };
+    let px = (w * h) as u64;
+    let raw = (tile.extended.width * tile.extended.height) as u64 * bands as u64 * 4 * 3;
+    matching + px * (2 * 4 * bands as u64 + 4 + 24 + 1) + raw
+}
+
+/// Runs one tile: its record, and its cells when it has any.
+pub fn run_tile(
+    scene: &Scene,
+    tile: &Tile,
+    rect: &Rectification,
+    memory_bytes: u64,
+) -> (TileRecord, Option<GridWindow>) {
+    let t = Instant::now();
+    let mut record = TileRecord {
+        tile: tile.clone(),
+        status: TileStatus::Done,
+        error: None,
+        seconds: 0.0,
+        disparity_range: Some(rect.disparity_range),
+        rectified_size: Some(rect.size),
+        matched: None,
+        points: 0,
+        memory_bytes,
+        cells: None,
+    };
+    let cells = match match_and_grid(scene, tile, rect, &mut record) {
+        Ok(Some(cells)) => {
+            record.cells = Some((cells.col, cells.row, cells.width, cells.height));
+            Some(cells)
+        }
+        Ok(None) => {
+            record.status = TileStatus::Empty;
+            None
+        }
+        Err(e) => {
+            record.status = TileStatus::Failed;
+            record.error = Some(format!("{e:#}"));
+            None
+        }
+    };
+    record.seconds = t.elapsed().as_secs_f64();
+    (record, cells)
+}
+
+/// Reads the windows, warps, matches, triangulates the core's pixels and grids them.
+fn match_and_grid(
+    scene: &Scene,
+    tile: &Tile,
+    rect: &Rectification,
+    record: &mut TileRecord,
+) -> Result<Option<GridWindow>> {
+    let size = rect.size;
+    let e = tile.extended;
+    let left = warp_window(
+        scene.left,
+        &rect.h_left,
+        (
+            e.x as f64,
+            e.y as f64,
+            (e.x + e.width) as f64,
+            (e.y + e.height) as f64,
+        ),
+        size,
+    )?;
+    let Some(left) = left else {
+        bail!("tile {} lies outside the left image", tile.id);
+    };
+    let h_right_inv = rect
+        .h_right
+        .inverse()
+        .context("the right rectifying homography is singular")?;
+    let (w, h) = (size.0 as f64, size.1 as f64);
+    let corners = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)].map(|(x, y)| h_right_inv.apply(x, y));
+    let bounds = corners.iter().fold(
+        (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |b, &(x, y)| (b.0.min(x), b.1.min(y), b.2.max(x), b.3.max(y)),
+    );
+    let Some(right) = warp_window(scene.right, &rect.h_right, bounds, size)? else {
+        return Ok(None);
+    };
+
+    let disparity = match scene.matcher {
+        TileMatcher::Classical(params) => {
+            predict_sgm(&left, &right, Some(rect.disparity_range), params, &Silent)?.0
+        }
+        TileMatcher::Network(p) => {
+            let p = p
+                .lock()
+                .map_err(|_| anyhow::anyhow!("the network failed on another tile"))?;
+            predict_monster(&p, &left, &right, &Silent)?
+        }
+    };
+    let finite = disparity.data().iter().filter(|v| v.is_finite()).count();
+    record.matched = Some(finite as f64 / disparity.data().len().max(1) as f64);
+    if let Some(dir) = scene.keep {
+        let name = if scene.single_tile {
+            scene.stem.to_string()
+        } else {
+            format!("{}_{}", scene.stem, tile.id)
+        };
+        keep_files(dir, &name, &left, &right, &disparity, rect)?;
+    }
+    drop((left, right));
+
+    let h_left_inv = rect
+        .h_left
+        .inverse()
+        .context("the left rectifying homography is singular")?;
+    let core = tile.core;
+    let (cx0, cy0) = (core.x as f64, core.y as f64);
+    let (cx1, cy1) = (cx0 + core.width as f64, cy0 + core.height as f64);
+    let valid = valid_pixels(&disparity, scene.border);
+    let mask = Mask::from_fn(size.0, size.1, |x, y| {
+        if !valid.get(x, y) {
+            return false;
+        }
+        let (u, v) = h_left_inv.apply(x as f64 + 0.5, y as f64 + 0.5);
+        (cx0..cx1).contains(&u) && (cy0..cy1).contains(&v)
+    });
+    if mask.count() == 0 {
+        return Ok(None);
+    }
+    let points = triangulate_disparity(
+        &disparity,
+        &rect.h_left,
+        &rect.h_right,
+        scene.rpc_left,
+        scene.rpc_right,
+        &mask,
+    )
+    .context("triangulating")?;
+    record.points = points.valid_count();
+    Ok(rasterize_window(&points, scene.grid, scene.gridding))
+}
+
+/// The raw window covering `bounds` (raw pixels, with a 2-pixel margin for the interpolation,
+/// clipped to the image) warped into the rectified frame; `None` when the window is empty.
+fn warp_window(
+    raw: &RawImage,
+    h: &Homography,
+    bounds: (f64, f64, f64, f64),
+    size: (usize, usize),
+) -> Result<Option<Image>> {
+    let (w, h_img) = raw.size();
+    let x0 = (bounds.0.floor() - 2.0).max(0.0);
+    let y0 = (bounds.1.floor() - 2.0).max(0.0);
+    let x1 = (bounds.2.ceil() + 2.0).min(w as f64);
+    let y1 = (bounds.3.ceil() + 2.0).min(h_img as f64);
+    if !(x1 > x0 && y1 > y0) {
+        return Ok(None);
+    }
+    let (x0, y0) = (x0 as usize, y0 as usize);
+    let window = raw.window(x0, y0, x1 as usize - x0, y1 as usize - y0)?;
+    let h_window = h.compose(&Homography::translation(x0 as f64, y0 as f64));
+    Ok(Some(warp_nan(&window, &h_window, size)?))
+}
+
+/// Writes a tile's rectified pair, homographies and disparity in the layout `eval` reads.
+fn keep_files(
+    dir: &Path,
+    name: &str,
+    left: &Image,
+    right: &Image,
+    disparity: &Image,
+    rect: &Rectification,
+) -> Result<()> {
+    let file = |sub: &str, ext: &str| dir.join(sub).join(format!("{name}.{ext}"));
+    write_npy(file("L", "iio"), left)?;
+    write_npy(file("R", "iio"), right)?;
+    write_npy(file("disparity", "iio"), disparity)?;
+    write_homographies(file("homography", "npz"), &rect.h_left, &rect.h_right)?;
+    Ok(())
+}
