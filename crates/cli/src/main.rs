@@ -203,7 +203,7 @@ enum Model {
     MonSter++ expects 8-bit RGB values (0–255): grey images are repeated to RGB, alpha is dropped; \
     rescale uint16 satellite images with --normalise percentile (2–98th percentile → 0–255). \
     Pixels with NaN in the left image are NaN in the output. Sizes are padded to multiples of 32 \
-    (replicate, as upstream). One forward pass may use at most --max-memory; larger pairs are cut \
+    (replicate, as upstream). One forward pass may use at most --net-memory; larger pairs are cut \
     into overlapping strips of full rows (epipolar lines) that are blended.\n\n\
     Examples:\n  seasonstereo predict --method sgm --range 0:48 L.iio R.iio -o d.iio\n  \
     seasonstereo predict --model monsterpp --weights mix_all.pth --config vitl --iters 32 \
@@ -260,13 +260,13 @@ struct NetworkArgs {
     normalise: nn::infer::Normalisation,
     /// Peak memory of one network pass, GiB; larger pairs are cut into strips of rows.
     #[arg(long, value_name = "GIB", default_value_t = 8.0)]
-    max_memory: f64,
+    net_memory: f64,
     /// Cut the pair into strips of ROWS rows for the network, whatever the memory budget.
     #[arg(long, value_name = "ROWS")]
-    tile: Option<usize>,
+    strip_rows: Option<usize>,
     /// Overlap of consecutive strips, rows (blended linearly).
     #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP)]
-    tile_overlap: usize,
+    strip_overlap: usize,
     #[command(flatten)]
     device: stages::DeviceArg,
 }
@@ -277,16 +277,16 @@ impl NetworkArgs {
             .weights
             .clone()
             .context("--weights is required with --model")?;
-        if self.max_memory.is_nan() || self.max_memory <= 0.0 {
-            bail!("--max-memory must be positive (got {})", self.max_memory);
+        if self.net_memory.is_nan() || self.net_memory <= 0.0 {
+            bail!("--net-memory must be positive (got {})", self.net_memory);
         }
         let mut o = pipeline::predict::MonsterOptions::new(weights, &self.net_config);
         o.iters = self.iters;
         o.max_disp = self.max_disp;
         o.normalisation = self.normalise;
-        o.memory_budget = (self.max_memory * (1u64 << 30) as f64) as u64;
-        o.tile_rows = self.tile;
-        o.tile_overlap = self.tile_overlap;
+        o.memory_budget = (self.net_memory * (1u64 << 30) as f64) as u64;
+        o.tile_rows = self.strip_rows;
+        o.tile_overlap = self.strip_overlap;
         o.device = self.device.name.clone();
         Ok(o)
     }

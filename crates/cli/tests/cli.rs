@@ -462,7 +462,7 @@ fn predict_monsterpp_errors_name_the_file_and_the_keys() {
         "--iters",
         "--max-disp",
         "--normalise",
-        "--tile",
+        "--strip-rows",
     ] {
         assert!(help.contains(flag), "{flag} missing from predict --help");
     }
@@ -913,7 +913,11 @@ fn reconstruct_a_real_pair_then_score_it_on_the_dfc2019_truth() {
         .next()
         .unwrap();
     assert!(mae.parse::<f64>().unwrap() < 1.6, "{line}");
-    assert!(dir.path().join("003-004_work/disparity").is_dir());
+    // One tile (the crop is under --tile 1024), its record beside its cells.
+    let record = dir.path().join("003-004_work/tiles/r000_c000.json");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
+    assert_eq!(record["status"], "done", "{record}");
     // `score` takes the UTM zone of the plain-TIFF truth from the DSM and agrees.
     let json = dir.path().join("scores.jsonl");
     let o = seasonstereo(&[

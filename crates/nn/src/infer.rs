@@ -121,7 +121,7 @@ pub enum InferError {
     Input(String),
     /// Even the smallest strip exceeds the memory budget.
     #[error(
-        "a {width}-px wide pair needs about {:.1} GiB for a {MIN_TILE_ROWS}-row strip with the `{preset}` configuration (max disparity {max_disp}), over the memory budget of {:.1} GiB: crop the pair (or lower the max disparity), or raise the budget (--max-memory); --tile ROWS sets the strip height by hand",
+        "a {width}-px wide pair needs about {:.1} GiB for a {MIN_TILE_ROWS}-row strip with the `{preset}` configuration (max disparity {max_disp}), over the memory budget of {:.1} GiB: crop the pair (or lower the max disparity), or raise the budget (--net-memory); --strip-rows ROWS sets the strip height by hand",
         *needed as f64 / GIB, *budget as f64 / GIB
     )]
     TooLarge {

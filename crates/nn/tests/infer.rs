@@ -78,7 +78,10 @@ fn strips_blend_and_odd_sizes() {
     p.tile_rows = None;
     p.memory_budget = 1;
     let msg = p.predict(&l, &r).unwrap_err().to_string();
-    assert!(msg.contains("budget") && msg.contains("--tile"), "{msg}");
+    assert!(
+        msg.contains("budget") && msg.contains("--strip-rows"),
+        "{msg}"
+    );
 }
 
 #[test]
