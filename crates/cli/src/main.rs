@@ -97,6 +97,10 @@ struct WorldArgs {
     /// Default: WORLD_<SEED>.
     #[arg(long)]
     name: Option<String>,
+    /// Also write the raw (unrectified) views as tiled uint8 GeoTIFFs raw/<ID>.tif, the input of
+    /// `seasonstereo reconstruct` (with --rpc-left/--rpc-right rpc/<ID>.json).
+    #[arg(long)]
+    raw: bool,
 }
 
 /// The classical matcher: census costs aggregated by MGM or SGM, then the left-right check,
@@ -526,6 +530,10 @@ fn run(cli: Cli) -> Result<()> {
             .map_err(anyhow::Error::msg)?;
             let name = a.name.unwrap_or_else(|| format!("WORLD_{}", a.seed));
             let paths = pipeline::world_io::save_world(&world, &a.output, &name)?;
+            if a.raw {
+                let (l, r) = pipeline::world_io::save_raw_views(&world, &a.output, &name)?;
+                println!("raw views: {} {}", l.display(), r.display());
+            }
             let (lo, hi) = world.disparity_range();
             println!(
                 "wrote pair {} to {} ({}x{} px, disparity range {lo}..{hi} px, {:.1} % occluded)",

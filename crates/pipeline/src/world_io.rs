@@ -134,6 +134,40 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
     Ok(paths)
 }
 
+/// Writes the two raw (unrectified) views of `world` as satellite imagery ships: tiled uint8
+/// RGB GeoTIFFs `raw/<ID>.tif` (nodata 0 outside the rendered area), beside the RPCs
+/// `rpc/<ID>.json` of [`save_world`]. `seasonstereo reconstruct` reads them like a real pair, and
+/// the world's truth DSM scores the result. Returns the left and right paths.
+pub fn save_raw_views(world: &World, root: &Path, name: &str) -> Result<(PathBuf, PathBuf)> {
+    let (left_id, right_id) = image_ids(name)?;
+    let (w, h) = world.left.image.size();
+    let meta = GeoTiffMeta {
+        nodata: Some(0.0),
+        ..GeoTiffMeta::default()
+    };
+    let mut paths = Vec::new();
+    for (id, view, rectify) in [
+        (&left_id, &world.left, &world.rectify_left),
+        (&right_id, &world.right, &world.rectify_right),
+    ] {
+        let inverse = rectify
+            .inverse()
+            .context("the world's rectifying homography is singular")?;
+        let (mut raw, inside) = raster::geometry::warp_homography(&view.image, &inverse, w, h)?;
+        let c = raw.channels();
+        for (px, &ok) in raw.data_mut().chunks_exact_mut(c).zip(inside.data()) {
+            // 0 is nodata: rendered pixels keep at least 1.
+            px.iter_mut()
+                .for_each(|v| *v = if ok { v.round().clamp(1.0, 255.0) } else { 0.0 });
+        }
+        let path = root.join("raw").join(format!("{id}.tif"));
+        raster::formats::write_tiled_u8(&path, &raw, &meta)
+            .with_context(|| format!("writing {}", path.display()))?;
+        paths.push(path);
+    }
+    Ok((paths[0].clone(), paths[1].clone()))
+}
+
 /// DFC2019 class of an OpenEarthMap id of the world: tree → 5 (foliage), water → 9, building → 6,
 /// everything else → 2 (ground).
 pub fn dfc_class(oem: u8) -> u8 {

@@ -1,4 +1,4 @@
-//! Cloud-Optimized GeoTIFF writer for float32 rasters (DSMs): internal 256 × 256 tiles, Deflate,
+//! Cloud-Optimized GeoTIFF writer for float32 rasters (DSMs; and tiled uint8 imagery): internal 256 × 256 tiles, Deflate,
 //! overviews by 2× down to one tile, every directory (IFD) at the start of the file and the tile
 //! data after them, smallest overview first: the layout GDAL's COG driver writes, so GDAL, QGIS
 //! and HTTP range readers open a whole-scene DSM at any zoom without reading all of it.
@@ -27,11 +27,35 @@ const DOUBLE: u16 = 12;
 const ASCII: u16 = 2;
 const LONG8: u16 = 16;
 
+/// How samples are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sample {
+    F32,
+    /// Rounded and clamped to 0–255; NaN becomes 0.
+    U8,
+}
+
 /// Writes `image` (float32, 1–16 bands) as a tiled, Deflate-compressed GeoTIFF with overviews
 /// and the georeferencing, GDAL_NODATA and RPC tags of `meta` (on the full-resolution image;
 /// the nodata tag on every level). Overviews average the finite samples of each 2 × 2 block.
 pub fn write_cog(path: impl AsRef<Path>, image: &Image, meta: &GeoTiffMeta) -> Result<()> {
-    let path = path.as_ref();
+    write_tiled(path.as_ref(), image, meta, Sample::F32, true)
+}
+
+/// Writes `image` as a tiled, Deflate-compressed uint8 (Geo)TIFF without overviews, the way
+/// satellite imagery ships (values rounded and clamped to 0–255, NaN stored as 0: give
+/// `meta.nodata = Some(0.0)` to mark it).
+pub fn write_tiled_u8(path: impl AsRef<Path>, image: &Image, meta: &GeoTiffMeta) -> Result<()> {
+    write_tiled(path.as_ref(), image, meta, Sample::U8, false)
+}
+
+fn write_tiled(
+    path: &Path,
+    image: &Image,
+    meta: &GeoTiffMeta,
+    sample: Sample,
+    overviews: bool,
+) -> Result<()> {
     let shape = |m: String| RasterError::Shape(format!("{}: {m}", path.display()));
     let (w, h, bands) = (image.width(), image.height(), image.channels());
     if w == 0 || h == 0 {
@@ -42,21 +66,22 @@ pub fn write_cog(path: impl AsRef<Path>, image: &Image, meta: &GeoTiffMeta) -> R
     }
     let tags = geo_tags(meta).map_err(shape)?;
     let mut levels = vec![image.clone()];
-    while levels
-        .last()
-        .is_some_and(|l| l.width() > COG_TILE || l.height() > COG_TILE)
+    while overviews
+        && levels
+            .last()
+            .is_some_and(|l| l.width() > COG_TILE || l.height() > COG_TILE)
     {
         let next = halve(levels.last().expect("a level"));
         levels.push(next);
     }
     let tiles: Vec<Vec<Vec<u8>>> = levels
         .iter()
-        .map(compress_tiles)
+        .map(|l| compress_tiles(l, sample))
         .collect::<io::Result<_>>()
         .map_err(|e| RasterError::io(path, e))?;
     let data_len: u64 = tiles.iter().flatten().map(|t| t.len() as u64).sum();
     let big = data_len > (u32::MAX as u64) - (64 << 20);
-    let bytes = layout(&levels, &tiles, &tags, big);
+    let bytes = layout(&levels, &tiles, &tags, sample, big);
     write_atomically(path, |file| {
         file.write_all(&bytes)?;
         // Tile data after every directory, smallest overview first (GDAL's COG order).
@@ -98,7 +123,7 @@ fn halve(image: &Image) -> Image {
 }
 
 /// The Deflate (zlib) stream of every tile, row-major; edge tiles are padded with NaN.
-fn compress_tiles(image: &Image) -> io::Result<Vec<Vec<u8>>> {
+fn compress_tiles(image: &Image, sample: Sample) -> io::Result<Vec<Vec<u8>>> {
     let (w, h, c) = (image.width(), image.height(), image.channels());
     let (across, down) = (w.div_ceil(COG_TILE), h.div_ceil(COG_TILE));
     (0..across * down)
@@ -106,6 +131,14 @@ fn compress_tiles(image: &Image) -> io::Result<Vec<Vec<u8>>> {
         .map(|i| {
             let (x0, y0) = ((i % across) * COG_TILE, (i / across) * COG_TILE);
             let mut raw = Vec::with_capacity(COG_TILE * COG_TILE * c * 4);
+            let mut push = |v: f32| match sample {
+                Sample::F32 => raw.extend_from_slice(&v.to_le_bytes()),
+                Sample::U8 => raw.push(if v.is_nan() {
+                    0
+                } else {
+                    v.round().clamp(0.0, 255.0) as u8
+                }),
+            };
             for y in y0..y0 + COG_TILE {
                 for x in x0..x0 + COG_TILE {
                     for b in 0..c {
@@ -114,7 +147,7 @@ fn compress_tiles(image: &Image) -> io::Result<Vec<Vec<u8>>> {
                         } else {
                             f32::NAN
                         };
-                        raw.extend_from_slice(&v.to_le_bytes());
+                        push(v);
                     }
                 }
             }
@@ -189,14 +222,20 @@ impl Entry {
 
 /// The header and every directory with its out-of-line values; the tile data follows, in the
 /// order [`write_cog`] writes it.
-fn layout(levels: &[Image], tiles: &[Vec<Vec<u8>>], tags: &GeoTags, big: bool) -> Vec<u8> {
+fn layout(
+    levels: &[Image],
+    tiles: &[Vec<Vec<u8>>],
+    tags: &GeoTags,
+    sample: Sample,
+    big: bool,
+) -> Vec<u8> {
     // Directory sizes do not depend on the offsets' values: lay them out with zero offsets
     // first, then again with the real ones.
     let dirs = |tile_offsets: &[Vec<u64>]| -> Vec<Vec<Entry>> {
         levels
             .iter()
             .enumerate()
-            .map(|(k, level)| directory(k, level, &tiles[k], &tile_offsets[k], tags, big))
+            .map(|(k, level)| directory(k, level, &tiles[k], &tile_offsets[k], tags, sample, big))
             .collect()
     };
     let zeros: Vec<Vec<u64>> = tiles.iter().map(|t| vec![0; t.len()]).collect();
@@ -252,27 +291,42 @@ fn directory(
     tiles: &[Vec<u8>],
     offsets: &[u64],
     tags: &GeoTags,
+    sample: Sample,
     big: bool,
 ) -> Vec<Entry> {
     let bands = level.channels();
+    let (bits, format) = match sample {
+        Sample::F32 => (32, 3),
+        Sample::U8 => (8, 1),
+    };
+    let photometric = if sample == Sample::U8 && bands == 3 {
+        2
+    } else {
+        1
+    };
     let counts: Vec<u64> = tiles.iter().map(|t| t.len() as u64).collect();
     let mut e = vec![
         Entry::long(254, (k > 0) as u32),
         Entry::long(256, level.width() as u32),
         Entry::long(257, level.height() as u32),
-        Entry::shorts(258, &vec![32; bands]),
+        Entry::shorts(258, &vec![bits; bands]),
         Entry::shorts(259, &[8]),
-        Entry::shorts(262, &[1]),
+        Entry::shorts(262, &[photometric]),
         Entry::shorts(277, &[bands as u16]),
         Entry::shorts(284, &[1]),
         Entry::shorts(322, &[COG_TILE as u16]),
         Entry::shorts(323, &[COG_TILE as u16]),
         Entry::offsets(324, offsets, big),
         Entry::offsets(325, &counts, big),
-        Entry::shorts(339, &vec![3; bands]),
+        Entry::shorts(339, &vec![format; bands]),
     ];
-    if bands > 1 {
-        e.push(Entry::shorts(338, &vec![0; bands - 1]));
+    let extra = if photometric == 2 {
+        bands - 3
+    } else {
+        bands - 1
+    };
+    if extra > 0 {
+        e.push(Entry::shorts(338, &vec![0; extra]));
     }
     if let Some(n) = &tags.nodata {
         e.push(Entry::ascii(42113, n));
@@ -376,6 +430,31 @@ mod tests {
         assert_eq!(g.epsg, Some(32617));
         assert_eq!(g.geotransform, [435000.0, 0.5, 0.0, 3355000.0, 0.0, -0.5]);
         assert!(back.nodata.unwrap().is_nan());
+    }
+
+    #[test]
+    fn tiled_uint8_imagery_rounds_and_keeps_its_nodata() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("raw.tif");
+        let mut img = Image::from_fn(300, 260, |x, y| ((x * 7 + y) % 300) as f32 - 20.4);
+        img.set(0, 0, 0, f32::NAN);
+        let rgb = img.to_rgb();
+        let meta = GeoTiffMeta {
+            nodata: Some(0.0),
+            ..GeoTiffMeta::default()
+        };
+        write_tiled_u8(&path, &rgb, &meta).unwrap();
+        let back = read_tiff(&path).unwrap();
+        assert_eq!(back.image.channels(), 3);
+        assert_eq!(back.nodata, Some(0.0));
+        for (a, b) in back.image.data().iter().zip(rgb.data()) {
+            let want = if b.is_nan() {
+                0.0
+            } else {
+                b.round().clamp(0.0, 255.0)
+            };
+            assert_eq!(*a, want);
+        }
     }
 
     #[test]

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::{Image, RasterError, Result};
 
-pub use self::cog::write_cog;
+pub use self::cog::{write_cog, write_tiled_u8};
 pub use self::npy::{read_npy, write_npy};
 pub use self::npz::{read_homographies, write_homographies};
 pub use self::pfm::{read_pfm, write_pfm};
