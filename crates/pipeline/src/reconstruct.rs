@@ -287,7 +287,7 @@ pub fn reconstruct(
             .collect();
         let matcher = match &opts.matcher {
             Matcher::Classical(p) => TileMatcher::Classical(p.clone()),
-            Matcher::Network(o) => TileMatcher::Network(Mutex::new(o.load()?)),
+            Matcher::Network(o) => TileMatcher::Network(Box::new(Mutex::new(o.load()?))),
         };
         let scene = Scene {
             left: &left,

@@ -27,7 +27,7 @@ pub enum TileMatcher {
     /// Census + MGM/SGM over each tile's range from the cameras.
     Classical(SgmParams),
     /// MonSter++, loaded once; tiles take turns.
-    Network(Mutex<MonsterPredictor>),
+    Network(Box<Mutex<MonsterPredictor>>),
 }
 
 /// What every tile shares.
