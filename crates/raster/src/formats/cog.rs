@@ -6,6 +6,7 @@
 //! The tiff crate writes strips only, hence this small writer. Classic TIFF is used up to 4 GiB,
 //! BigTIFF beyond.
 
+use std::borrow::Cow;
 use std::io::{self, Write};
 use std::path::Path;
 
@@ -65,14 +66,15 @@ fn write_tiled(
         return Err(shape(format!("cannot write a {w}x{h}x{bands} COG")));
     }
     let tags = geo_tags(meta).map_err(shape)?;
-    let mut levels = vec![image.clone()];
+    // The full resolution is borrowed, not copied: a scene's DSM can be gigabytes.
+    let mut levels = vec![Cow::Borrowed(image)];
     while overviews
         && levels
             .last()
             .is_some_and(|l| l.width() > COG_TILE || l.height() > COG_TILE)
     {
         let next = halve(levels.last().expect("a level"));
-        levels.push(next);
+        levels.push(Cow::Owned(next));
     }
     let tiles: Vec<Vec<Vec<u8>>> = levels
         .iter()
@@ -223,7 +225,7 @@ impl Entry {
 /// The header and every directory with its out-of-line values; the tile data follows, in the
 /// order [`write_cog`] writes it.
 fn layout(
-    levels: &[Image],
+    levels: &[Cow<Image>],
     tiles: &[Vec<Vec<u8>>],
     tags: &GeoTags,
     sample: Sample,
