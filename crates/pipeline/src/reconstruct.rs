@@ -335,9 +335,8 @@ pub fn reconstruct(
         let threads = rayon::current_num_threads().max(1);
         in_flight = match matcher {
             TileMatcher::Network(_) => 1,
-            TileMatcher::Classical(_) => {
-                (((opts.max_memory - base) / largest.max(1)) as usize).clamp(1, threads)
-            }
+            TileMatcher::Classical(_) => (((opts.max_memory - base) / largest.max(1)) as usize)
+                .clamp(1, threads.min(todo.len().max(1))),
         };
         progress.begin(&format!("tiles ({in_flight} at once)"), todo.len());
         let next = AtomicUsize::new(0);
