@@ -82,7 +82,9 @@ impl AblationOptions {
 
     fn check(&self) -> Result<()> {
         if self.steps == 0 || self.heldout_worlds == 0 || self.val_worlds == 0 {
-            bail!("the ablation needs at least one step, one validation world and one held-out world");
+            bail!(
+                "the ablation needs at least one step, one validation world and one held-out world"
+            );
         }
         if self.validate_every == 0 || self.valid_pairs == 0 {
             bail!("the training curves need validation: every N ≥ 1 steps, on ≥ 1 pairs");
@@ -145,7 +147,10 @@ pub fn run_ablation(opts: &AblationOptions, progress: &dyn Progress) -> Result<A
         .map(|k| opts.seed + HELDOUT_SEED_OFFSET + k)
         .collect();
     let heldout = heldout::write_heldout(&out.join("heldout"), opts.size, &seeds, progress)?;
-    lap("held-out worlds (synchronic, winter ↔ summer)", &mut seconds);
+    lap(
+        "held-out worlds (synchronic, winter ↔ summer)",
+        &mut seconds,
+    );
 
     let plan = RunPlan {
         data_root: out.join("dataset"),
@@ -224,10 +229,46 @@ fn columns_with_data(mut table: Table) -> Table {
         .map(|i| table.rows.iter().any(|r| r.splits[i].is_some()))
         .collect();
     let mut k = keep.iter();
-    table.columns.retain(|_| *k.next().expect("one flag per column"));
+    table
+        .columns
+        .retain(|_| *k.next().expect("one flag per column"));
     for row in &mut table.rows {
         let mut k = keep.iter();
-        row.splits.retain(|_| *k.next().expect("one flag per column"));
+        row.splits
+            .retain(|_| *k.next().expect("one flag per column"));
     }
     table
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::records::PairRecord;
+
+    fn scored(split: &str, method: &str, mae: f64) -> PairRecord {
+        let mut r = PairRecord::unscored(split, "W1_A-W1_B", "W1", method, "scored");
+        r.mae_filtered = Some(mae);
+        r
+    }
+
+    #[test]
+    fn the_table_keeps_the_held_out_columns_only() {
+        let records = [
+            scored(SYNCHRONIC, "a", 0.5),
+            scored(CROSS_SEASON, "a", 0.75),
+            scored(CROSS_SEASON, "b", 1.0),
+        ];
+        let full = crate::eval::aggregate(&records);
+        assert_eq!(
+            full.columns.len(),
+            6,
+            "the benchmark's four splits come first"
+        );
+        let t = columns_with_data(full);
+        let titles: Vec<&str> = t.columns.iter().map(|c| c.title.as_str()).collect();
+        assert_eq!(titles, [SYNCHRONIC, CROSS_SEASON]);
+        let mean = |row: usize, col: usize| t.rows[row].splits[col].as_ref().map(|s| s.mean);
+        assert_eq!((mean(0, 0), mean(0, 1)), (Some(0.5), Some(0.75)));
+        assert_eq!((mean(1, 0), mean(1, 1)), (None, Some(1.0)));
+    }
 }

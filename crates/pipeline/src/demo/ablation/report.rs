@@ -35,19 +35,22 @@ fn intro(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) {
          cross-season pairs: the same network is fine-tuned on S1 (the real synchronic pairs only) \
          and on S3 (S1 plus synthetic synchronic and diachronic pairs in equal shares, same \
          budget), then both are scored on test pairs. This report runs that experiment in \
-         miniature, offline on the CPU: {tw} procedural training worlds of {n}×{n} px (seed {seed} \
-         onwards) go through the real stages, the tiny MonSter++ is fine-tuned on each subset for \
+         miniature, offline on the CPU: {tw} of {n}×{n} px (seed {seed} onwards) go through the real stages, the tiny MonSter++ is fine-tuned on each subset for \
          {steps} steps from the same initial weights and seed, and both networks and the classical \
-         teacher ({classical}) are scored with the benchmark's DSM metric on {hw} held-out worlds \
-         no stage has seen, synchronic and winter ↔ summer. The numbers are whatever this run \
+         teacher ({classical}) are scored with the benchmark's DSM metric on {hw} no stage has seen, synchronic and winter ↔ summer. The numbers are whatever this run \
          gives; section 4 says what they can and cannot mean.",
-        tw = opts.train_worlds,
+        tw = count(opts.train_worlds, "procedural training world"),
         n = opts.size,
         seed = opts.seed,
         steps = opts.steps,
         classical = s.classical,
-        hw = opts.heldout_worlds,
+        hw = count(opts.heldout_worlds, "held-out world"),
     ));
+}
+
+/// "1 world", "3 worlds".
+fn count(n: usize, noun: &str) -> String {
+    format!("{n} {noun}{}", if n == 1 { "" } else { "s" })
 }
 
 fn training_set(r: &mut Report, s: &AblationSummary) {
@@ -116,50 +119,34 @@ fn training(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) {
         ve = opts.validate_every,
         vp = opts.valid_pairs,
     ));
-    let losses: Vec<(String, Vec<f64>)> = s
-        .runs
-        .iter()
-        .map(|run| {
-            let v: Vec<f64> = run.steps.iter().map(|x| x.terms.total as f64).collect();
-            (run.name.clone(), moving_mean(&v, LOSS_WINDOW))
-        })
-        .collect();
-    let series: Vec<(&str, &[f64])> = losses
-        .iter()
-        .map(|(n, v)| (n.as_str(), v.as_slice()))
-        .collect();
     r.paragraph(&format!(
         "Training loss per step (mean over the last {LOSS_WINDOW} steps). The two losses are on \
          different samples, so their levels are not comparable; their trends are."
     ));
-    r.line_plot(&series, "step", "training loss", None);
-    let epe: Vec<(String, Vec<f64>)> = s
-        .runs
-        .iter()
-        .map(|run| {
-            (
-                run.name.clone(),
-                run.validations.iter().map(|v| v.scores.epe).collect(),
-            )
-        })
-        .collect();
-    let series: Vec<(&str, &[f64])> = epe
-        .iter()
-        .map(|(n, v)| (n.as_str(), v.as_slice()))
-        .collect();
+    curves(r, &s.runs, "step", "training loss", |run| {
+        let v: Vec<f64> = run.steps.iter().map(|x| x.terms.total as f64).collect();
+        moving_mean(&v, LOSS_WINDOW)
+    });
     r.paragraph(&format!(
         "Validation end-point error (px) against the exact disparity; pass k is at step \
          (k − 1)·{} (pass 1: the shared initial weights).",
         opts.validate_every
     ));
-    r.line_plot(&series, "validation pass", "validation EPE (px)", None);
+    curves(
+        r,
+        &s.runs,
+        "validation pass",
+        "validation EPE (px)",
+        |run| run.validations.iter().map(|v| v.scores.epe).collect(),
+    );
     let px = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2} px"));
     let rows: Vec<Vec<String>> = s
         .runs
         .iter()
         .map(|run| {
             let (first, last) = (run.validations.first(), run.validations.last());
-            let pick = |v: Option<&train::ValidationRecord>, f: fn(&train::ValidationRecord) -> Option<f64>| {
+            let pick = |v: Option<&train::ValidationRecord>,
+                        f: fn(&train::ValidationRecord) -> Option<f64>| {
                 px(v.and_then(f))
             };
             vec![
@@ -185,6 +172,23 @@ fn training(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) {
         ],
         &rows,
     );
+}
+
+/// One line per run of `values(run)` against its index + 1.
+fn curves(
+    r: &mut Report,
+    runs: &[RunResult],
+    x_label: &str,
+    y_label: &str,
+    values: impl Fn(&RunResult) -> Vec<f64>,
+) {
+    let data: Vec<Vec<f64>> = runs.iter().map(values).collect();
+    let series: Vec<(&str, &[f64])> = runs
+        .iter()
+        .zip(&data)
+        .map(|(run, v)| (run.name.as_str(), v.as_slice()))
+        .collect();
+    r.line_plot(&series, x_label, y_label, None);
 }
 
 fn first_loss(run: &RunResult) -> f32 {
@@ -242,8 +246,16 @@ fn write_pictures(opts: &AblationOptions, s: &AblationSummary) -> Result<Picture
     for (file, source, caption) in [
         ("left", sync.join("L").join(format!("{stem}.iio")), "left"),
         ("right", sync.join("R").join(format!("{stem}.iio")), "right"),
-        ("left_winter", s.heldout.first_winter.clone(), "left in winter"),
-        ("right_summer", s.heldout.first_summer.clone(), "right in summer"),
+        (
+            "left_winter",
+            s.heldout.first_winter.clone(),
+            "left in winter",
+        ),
+        (
+            "right_summer",
+            s.heldout.first_summer.clone(),
+            "right in summer",
+        ),
     ] {
         let image = raster::read_image(&source)?;
         let path = format!("pictures/{file}.png");
@@ -258,7 +270,11 @@ fn write_pictures(opts: &AblationOptions, s: &AblationSummary) -> Result<Picture
     let mut dsms = Vec::new();
     let mut picture = |dsm: &Image, file: &str, caption: String| -> Result<()> {
         let path = format!("pictures/{file}.png");
-        write_png(out.join(&path), &dsm_picture(dsm, cell, range), PngDepth::Eight)?;
+        write_png(
+            out.join(&path),
+            &dsm_picture(dsm, cell, range),
+            PngDepth::Eight,
+        )?;
         dsms.push((path, caption));
         Ok(())
     };
@@ -348,19 +364,27 @@ fn mean_of(t: &Table, method: &str, split: &str) -> Option<f64> {
 fn reading(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) {
     r.heading("4. What this shows, and what it does not");
     let names: Vec<&str> = s.runs.iter().map(|r| r.name.as_str()).collect();
+    let classical = mean_of(&s.table, &s.classical, CROSS_SEASON);
     let verdict = match (
         mean_of(&s.table, names[0], CROSS_SEASON),
         mean_of(&s.table, names[1], CROSS_SEASON),
     ) {
         (Some(a), Some(b)) => format!(
             "On the held-out winter ↔ summer pairs this run gives {} for {} and {} for {}: S3 is \
-             {} by {:.3} m.",
+             {} by {:.3} m. The classical teacher scores {} there{}.",
             metres(Some(a)),
             names[0],
             metres(Some(b)),
             names[1],
-            if b < a { "better" } else { "not better" },
-            (a - b).abs()
+            if b < a { "better" } else { "worse" },
+            (a - b).abs(),
+            metres(classical),
+            if classical.is_some_and(|c| c < a.min(b)) {
+                ": at this budget both networks are still far from the labels they learn from, so \
+                 the comparison is between two unfinished trainings"
+            } else {
+                ""
+            }
         ),
         _ => "One of the networks scored no held-out winter ↔ summer pair (no overlap with the \
               truth), so this run cannot compare them."
@@ -377,11 +401,11 @@ fn reading(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) {
          pretrained checkpoint for 50,000 steps); the worlds are procedural; the held-out \
          seasons come from the same built-in appearance model that made S3's synthetic pairs \
          (the paper tests on real multi-date pairs, whose changes no recolouring reproduces); \
-         {hw} held-out worlds and one seed give a wide spread, so a difference smaller than the \
+         {hw} and one seed give a wide spread, so a difference smaller than the \
          std over the worlds is noise. Run it with more steps (`--steps`) or another seed \
          (`--seed`) to see how stable the ordering is.",
         steps = opts.steps,
-        hw = opts.heldout_worlds,
+        hw = count(opts.heldout_worlds, "held-out world"),
     ));
 }
 
@@ -401,8 +425,16 @@ fn timings_and_commands(r: &mut Report, opts: &AblationOptions, s: &AblationSumm
     r.heading("Reproduce");
     let out = opts.out_dir.display().to_string();
     r.paragraph("This whole report:");
+    let d = AblationOptions::new(&opts.out_dir);
+    let mut flags = String::new();
+    if opts.train_worlds != d.train_worlds {
+        flags += &format!(" --train-worlds {}", opts.train_worlds);
+    }
+    if opts.heldout_worlds != d.heldout_worlds {
+        flags += &format!(" --heldout-worlds {}", opts.heldout_worlds);
+    }
     r.code(&format!(
-        "seasonstereo demo --ablation --size {} --seed {} --steps {} -o {out}{}",
+        "seasonstereo demo --ablation --size {} --seed {} --steps {}{flags} -o {out}{}",
         opts.size,
         opts.seed,
         opts.steps,
