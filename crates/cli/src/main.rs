@@ -4,6 +4,7 @@
 
 mod bars;
 mod dataset;
+mod demo;
 mod dsm;
 mod reconstruct;
 mod stages;
@@ -15,7 +16,6 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use matching::{Paths, SgmParams};
-use pipeline::demo::{metres, percent, pixels, run_demo, DemoOptions};
 use pipeline::predict::{predict_monster, predict_sgm, read_pair, write_disparity};
 use pipeline::progress::track;
 
@@ -55,7 +55,7 @@ enum Command {
     Dsm(dsm::DsmArgs),
     /// SeasonStereo's story on a procedural world: four seasons, a synchronic and a winter ↔ summer
     /// pair matched, triangulated to DSMs and scored against the truth; an HTML report (offline, CPU).
-    Demo(DemoArgs),
+    Demo(demo::DemoArgs),
     /// Altitude MAE of the DSMs from predicted disparities, as the benchmark's code computes it
     /// (RPC triangulation, max-per-cell DSM on the ground truth's grid, NCC registration, foliage
     /// and water masked); prints the paper's Table 1. Resumable: pairs already in OUT/pairs.csv
@@ -398,21 +398,6 @@ impl SgmArgs {
     }
 }
 
-#[derive(Args)]
-struct DemoArgs {
-    /// Output folder of the report (report.html), its images and the world.
-    #[arg(short, long, default_value = "out/demo")]
-    output: PathBuf,
-    /// World size, pixels.
-    #[arg(long, default_value_t = 512)]
-    size: usize,
-    /// World seed.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    #[command(flatten)]
-    sgm: SgmArgs,
-}
-
 #[derive(Clone, Copy, ValueEnum)]
 enum EvalMethod {
     /// Census + MGM on each (cropped) rectified pair, range from the cameras.
@@ -623,40 +608,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Synthesize(a) => dataset::run_synthesize_command(a, &progress)?,
         Command::Dataset(a) => dataset::run_dataset(a, &progress)?,
         Command::Train(a) => train::run(a)?,
-        Command::Demo(a) => {
-            let opts = DemoOptions {
-                size: a.size,
-                seed: a.seed,
-                out_dir: a.output,
-                sgm: a.sgm.params()?,
-            };
-            let s = run_demo(&opts, &progress)?;
-            let v = &s.visible;
-            println!(
-                "disparity range {}..{} px (from the cameras); on pixels visible in both views: coverage {}, MAE {}, bad-1 {}, bad-2 {}",
-                s.range.0,
-                s.range.1,
-                percent(v.coverage),
-                pixels(v.mae),
-                percent(v.bad1),
-                percent(v.bad2)
-            );
-            for p in &s.pairs {
-                let d = &p.dsm.scores;
-                println!(
-                    "{} pair: disparity MAE {}, bad-2 {} (visible); DSM MAE {} filtered, {} all cells, coverage {} ({})",
-                    p.name,
-                    pixels(p.visible.mae),
-                    percent(p.visible.bad2),
-                    metres(d.mae_filtered),
-                    metres(d.mae_raw),
-                    percent(d.coverage),
-                    p.dsm.path.display()
-                );
-            }
-            let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
-            println!("report: {} ({total:.1} s)", s.report.display());
-        }
+        Command::Demo(a) => demo::run(a, &progress)?,
         Command::Eval(a) => {
             use pipeline::eval::{evaluate, AoiRule, EvalOptions, Method as M};
             let method = match (&a.predictions, a.method) {

@@ -201,6 +201,23 @@ fn errors_name_the_file_and_exit_nonzero() {
 }
 
 #[test]
+fn ablation_flags_need_ablation() {
+    let o = seasonstereo(&["demo", "--steps", "5"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--ablation"), "{}", stderr(&o));
+    let help = seasonstereo(&["demo", "--help"]);
+    let text = String::from_utf8_lossy(&help.stdout);
+    for flag in [
+        "--ablation",
+        "--steps",
+        "--train-worlds",
+        "--heldout-worlds",
+    ] {
+        assert!(text.contains(flag), "{text}");
+    }
+}
+
+#[test]
 fn help_lists_every_command() {
     let o = seasonstereo(&["--help"]);
     let text = String::from_utf8_lossy(&o.stdout);

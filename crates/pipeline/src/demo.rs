@@ -4,6 +4,7 @@
 //! through the RPC cameras into DSMs, score them against the truth DSM with the benchmark's
 //! protocol, and write an HTML report. Offline, CPU only, deterministic.
 
+pub mod ablation;
 mod figures;
 
 use std::path::{Path, PathBuf};
@@ -99,6 +100,21 @@ const DFC_CLASSES: [(u8, &str); 4] = [(2, "ground"), (6, "building"), (5, "folia
 /// Altitude errors at and above this are the brightest colour of the error maps, metres.
 const DSM_ERROR_MAX: f32 = 3.0;
 
+/// The `season` variant of one view of a world (image id `id`) by the built-in appearance model,
+/// the view's exact classes as hints: colours change, geometry does not, so the true disparity
+/// of any season pair is the synchronic one.
+pub fn season_variant(
+    generator: &BuiltinSeasons,
+    id: &str,
+    view: &world::View,
+    season: Season,
+) -> Result<Image> {
+    let source = SourceImage::new(id, &view.image).with_classes(&view.classes);
+    generator
+        .generate(&source, season)
+        .with_context(|| format!("the {season} variant of {id}"))
+}
+
 /// Runs the demo and writes `out_dir/report.html`.
 pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSummary> {
     let out = &opts.out_dir;
@@ -129,15 +145,10 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
     // fields only, so every edge stays where it was and the true disparity is unchanged.
     let (left_id, right_id) = crate::world_io::image_ids(&name)?;
     let generator = BuiltinSeasons::new(opts.seed);
-    let left_src = SourceImage::new(&left_id, &world.left.image).with_classes(&world.left.classes);
-    let right_src =
-        SourceImage::new(&right_id, &world.right.image).with_classes(&world.right.classes);
     let seasons_dir = out.join("seasons");
     let mut left_seasons = Vec::new();
     for season in Season::ALL {
-        let image = generator
-            .generate(&left_src, season)
-            .with_context(|| format!("the {season} variant of {left_id}"))?;
+        let image = season_variant(&generator, &left_id, &world.left, season)?;
         write_png(
             seasons_dir.join(format!("left_{season}_thumb.png")),
             &thumbnail(&image, 256)?,
@@ -150,9 +161,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
         .find(|(s, _)| *s == Season::Winter)
         .map(|(_, i)| i.clone())
         .expect("every season was generated");
-    let right_summer = generator
-        .generate(&right_src, Season::Summer)
-        .with_context(|| format!("the summer variant of {right_id}"))?;
+    let right_summer = season_variant(&generator, &right_id, &world.right, Season::Summer)?;
     let winter_path = seasons_dir.join(format!("{left_id}__winter.iio"));
     let summer_path = seasons_dir.join(format!("{right_id}__summer.iio"));
     raster::write_image(&winter_path, &left_winter)?;

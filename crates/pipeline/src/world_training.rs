@@ -4,7 +4,8 @@
 //! 1. per world (seed): the rectified pair and its homographies (the synchronic pair), "raw"
 //!    images = the rectified views warped back through the homographies (the world renders no raw
 //!    image), the exact class maps in the raw frame, and the segmentation files
-//!    `<id>_mask.png` of the exact classes (water 6, tree 5, building 8; release polarity);
+//!    `<id>_mask.png` of the exact classes (water 6, tree 5, building 8; release polarity), or,
+//!    with [`WorldMasks::Segmenter`], the `masks` stage's offline segmenter on the raw images;
 //! 2. `teacher`: SGM on the real pairs (the offline default teacher); the exact disparity is the
 //!    LiDAR-like ground truth (`disparity_maps/GT`);
 //! 3. `synthesize`: the built-in seasonal model with the world's classes as hints, the fidelity
@@ -33,6 +34,7 @@ use synth::BuiltinSeasons;
 use world::{class, WorldParams};
 
 use crate::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
+use crate::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter};
 use crate::progress::Progress;
 use crate::synthesize::{run_synthesize, SynthesizeOptions, SynthesizeSummary};
 use crate::teacher::{run_teacher, Teacher, TeacherOptions};
@@ -57,6 +59,18 @@ pub struct WorldTrainingOptions {
     pub crop: usize,
     pub sgm: SgmParams,
     pub previews: bool,
+    /// Where the water, tree and building masks come from.
+    pub masks: WorldMasks,
+}
+
+/// The segmentation masks of a world training set.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum WorldMasks {
+    /// The world's exact classes: isolates the other stages from segmentation errors.
+    #[default]
+    Exact,
+    /// The `masks` stage with the offline segmenter on the raw images, as real data goes.
+    Segmenter,
 }
 
 impl WorldTrainingOptions {
@@ -72,6 +86,7 @@ impl WorldTrainingOptions {
             crop: crate::synthesize::DEFAULT_CROP,
             sgm: SgmParams::default(),
             previews: false,
+            masks: WorldMasks::Exact,
         }
     }
 }
@@ -160,8 +175,27 @@ pub fn build_world_training(
         let syn_summary = run_synthesize(&syn, &generator, progress)?;
         let mut b = BuildOptions::new(&pairs, &teacher_dir, &opts.out_dir);
         b.synthetic_dir = Some(src.join("synthetic"));
-        b.masks = MaskDirs::release(&src.join("masks"));
-        b.segmenter = "world classes (exact)".into();
+        match opts.masks {
+            WorldMasks::Exact => {
+                b.masks = MaskDirs::release(&src.join("masks"));
+                b.segmenter = "world classes (exact)".into();
+            }
+            WorldMasks::Segmenter => {
+                let segmenter = OfflineSegmenter::default();
+                b.segmenter = segmenter.name();
+                let out_dir = src.join("segmentation");
+                run_masks(
+                    &MasksOptions {
+                        images_dir: src.join("raw"),
+                        out_dir: out_dir.clone(),
+                        shard: Shard::ALL,
+                        segmenter: Box::new(segmenter),
+                    },
+                    progress,
+                )?;
+                b.masks = MaskDirs::release(&out_dir);
+            }
+        }
         b.teacher_name = Some(if split == "train" {
             "sgm".into()
         } else {

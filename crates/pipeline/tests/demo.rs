@@ -1,9 +1,11 @@
 //! The demo end to end at its default size: the story it tells (four seasons, a synchronic and a
-//! winter ↔ summer pair, two DSMs scored against the truth) and its accuracy on the synchronic pair.
+//! winter ↔ summer pair, two DSMs scored against the truth) and its accuracy on the synchronic pair;
+//! and a drastically reduced `demo --ablation`.
 
 use std::path::Path;
 
 use matching::SgmParams;
+use pipeline::demo::ablation::{run_ablation, AblationOptions, CROSS_SEASON, SYNCHRONIC};
 use pipeline::demo::{run_demo, DemoOptions, DemoSummary};
 use pipeline::Silent;
 
@@ -127,4 +129,98 @@ fn demo_tells_the_season_story_and_keeps_its_accuracy() {
     let links = html.replace("xmlns=\"http://www.w3.org/2000/svg\"", "");
     assert!(!links.contains("http"), "the report links outside itself");
     assert!(!html.contains("<script") && !html.contains("<link"));
+}
+
+/// A drastically reduced `demo --ablation` (one 128² world per role, 2 steps a run; the full run
+/// is measured in BENCHMARKS.md): S1 and S3 start from the same weights and seed and train on
+/// different lists, every method is scored on both held-out splits, and the report holds the
+/// table, the curves and no debug text.
+#[test]
+fn ablation_trains_s1_and_s3_on_different_data_and_reports_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path();
+    let mut opts = AblationOptions::new(out);
+    opts.size = 128;
+    opts.train_worlds = 1;
+    opts.val_worlds = 1;
+    opts.heldout_worlds = 1;
+    opts.steps = 2;
+    opts.validate_every = 2;
+    opts.valid_pairs = 1;
+    let s = run_ablation(&opts, &Silent).unwrap();
+
+    // Same initialisation and seed, different training data.
+    let (s1, s3) = (&s.runs[0], &s.runs[1]);
+    assert_eq!(s1.config.model.init, s3.config.model.init);
+    assert_eq!(s1.config.run.seed, s3.config.run.seed);
+    assert_eq!(s1.config.run.steps, s3.config.run.steps);
+    assert!(s1.config.model.init.as_ref().unwrap().is_file());
+    let list = |c: &train::TrainConfig| {
+        let name = c.data.experiment.clone().unwrap();
+        std::fs::read_to_string(c.data.root.join(format!("experiments/{name}.csv"))).unwrap()
+    };
+    let (l1, l3) = (list(&s1.config), list(&s3.config));
+    assert_ne!(l1, l3);
+    assert!(!l1.contains("__"), "S1 holds real pairs only:\n{l1}");
+    assert!(
+        l1.lines().skip(1).all(|row| l3.contains(row)),
+        "S3 extends S1"
+    );
+    let c = &s3.samples;
+    assert!(c.real == s1.samples.total && c.synchronic_synthetic > 0 && c.diachronic > 0);
+    // The shared weights score the same before training; the runs then see different batches.
+    assert_eq!(s1.validations[0].scores.epe, s3.validations[0].scores.epe);
+    assert_eq!((s1.steps.len(), s3.validations.len()), (2, 2));
+    assert!(s1
+        .steps
+        .iter()
+        .chain(&s3.steps)
+        .all(|r| r.terms.total.is_finite()));
+    assert_ne!(s1.steps[1].terms.total, s3.steps[1].terms.total);
+
+    // The table: the classical matcher and both networks, both held-out splits; the classical
+    // matcher's numbers are finite (2 steps from random weights may leave a network without a
+    // single triangulated pixel: recorded as "no overlap", shown as "–").
+    let methods: Vec<&str> = s.table.rows.iter().map(|r| r.method.as_str()).collect();
+    assert_eq!(methods, [s.classical.as_str(), &s1.name, &s3.name]);
+    let columns: Vec<&str> = s.table.columns.iter().map(|c| c.title.as_str()).collect();
+    assert_eq!(columns, [SYNCHRONIC, CROSS_SEASON]);
+    for cell in &s.table.rows[0].splits {
+        let cell = cell.as_ref().unwrap();
+        assert!(cell.mean.is_finite() && cell.mean < 2.0, "{cell:?}");
+        assert!(cell.coverage.is_some_and(|c| c > 0.1), "{cell:?}");
+    }
+    assert_eq!(s.records.len(), 3 * 2);
+    for r in &s.records {
+        assert!(
+            r.status == "no_overlap" || r.mae_filtered.is_some_and(f64::is_finite),
+            "{r:?}"
+        );
+    }
+
+    let html = std::fs::read_to_string(&s.report).unwrap();
+    for needle in [
+        "DSM MAE",
+        "<td>S1 (real only)</td>",
+        "<polyline",
+        "validation EPE",
+        "What this shows, and what it does not",
+        "seasonstereo demo --ablation",
+        "Timings",
+    ] {
+        assert!(html.contains(needle), "report lacks {needle}");
+    }
+    let mae = s.table.rows[0].splits[1].as_ref().unwrap().mean;
+    assert!(
+        html.contains(&format!("{mae:.2}")),
+        "the cross-season MAE of the table"
+    );
+    for debug in ["Some(", "None", "{:?}", "NaN", "inf "] {
+        assert!(!html.contains(debug), "debug text {debug:?} in the report");
+    }
+    for src in sources(&html) {
+        assert!(!src.contains("://"), "{src}");
+        let img = raster::read_image(out.join(&src)).unwrap();
+        assert!(img.width() > 0, "{src}");
+    }
 }

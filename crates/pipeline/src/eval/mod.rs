@@ -416,6 +416,16 @@ fn safe_name(s: &str) -> String {
         .collect()
 }
 
+/// Where [`EvalOptions::save_dsm`] writes the DSM of pair `stem` of `split` for `method` under
+/// the output folder `out_dir`: `dsm/<method>/<split>/<stem>.tif`, names made file-safe.
+pub fn saved_dsm_path(out_dir: &Path, method: &str, split: &str, stem: &str) -> PathBuf {
+    out_dir
+        .join("dsm")
+        .join(safe_name(method))
+        .join(safe_name(split))
+        .join(format!("{stem}.tif"))
+}
+
 /// Scores one pair (or drops it by the Omaha rule).
 fn evaluate_pair(
     opts: &EvalOptions,
@@ -533,12 +543,7 @@ fn evaluate_pair(
     record.pixels = dsm.1;
     let dsm = dsm.0;
     if opts.save_dsm {
-        let path = opts
-            .out_dir
-            .join("dsm")
-            .join(safe_name(&opts.method_name))
-            .join(safe_name(&split.name))
-            .join(format!("{stem}.tif"));
+        let path = saved_dsm_path(&opts.out_dir, &opts.method_name, &split.name, stem);
         camera::write_dsm(&path, &dsm, &truth.grid)
             .with_context(|| format!("writing the predicted DSM {}", path.display()))?;
     }
