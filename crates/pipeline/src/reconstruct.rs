@@ -285,9 +285,18 @@ pub fn reconstruct(
             .iter()
             .filter(|t| opts.shard.contains(t.index) && finished(t).is_none())
             .collect();
+        // Held by the process besides the tiles (images' headers, records, thread stacks).
+        let base = 256 << 20;
         let matcher = match &opts.matcher {
             Matcher::Classical(p) => TileMatcher::Classical(p.clone()),
-            Matcher::Network(o) => TileMatcher::Network(Box::new(Mutex::new(o.load()?))),
+            Matcher::Network(o) => {
+                // The network cuts a tile into strips of rows to stay within the budget.
+                let mut o = o.clone();
+                o.memory_budget = o
+                    .memory_budget
+                    .min(opts.max_memory.saturating_sub(2 * base));
+                TileMatcher::Network(Box::new(Mutex::new(o.load()?)))
+            }
         };
         let scene = Scene {
             left: &left,
@@ -315,7 +324,6 @@ pub fn reconstruct(
             .map(|(t, r)| r.as_ref().map_or(0, |r| tile_memory(r, t, bands, &matcher)))
             .collect();
         largest = memory.iter().copied().max().unwrap_or(0);
-        let base = 256 << 20;
         if !todo.is_empty() && largest + base > opts.max_memory {
             bail!(
                 "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \

@@ -223,3 +223,30 @@ fn a_broken_image_fails_its_tiles_only_and_a_tight_budget_names_the_fix() {
         "{msg}"
     );
 }
+
+/// With weights, every tile is matched by MonSter++ (the tiny parity fixture: the geometry runs,
+/// the accuracy of random-ish weights is not the point), its strips planned inside the budget.
+#[test]
+fn the_network_matches_every_tile_when_weights_are_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = raw_world(dir.path());
+    let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/fixtures/monsterpp-tiny/weights.safetensors");
+    assert!(
+        weights.is_file(),
+        "fixture {} is missing",
+        weights.display()
+    );
+    let mut net = pipeline::predict::MonsterOptions::new(weights, "tiny");
+    net.device = "cpu".into();
+    let opts = ReconstructOptions {
+        matcher: Matcher::Network(net),
+        ..options(&root, &dir.path().join("net.tif"), 160)
+    };
+    let s = reconstruct(&opts, &Silent).unwrap();
+    assert_eq!(s.records.len(), 4);
+    assert_eq!(s.in_flight, 1, "one network, tiles take turns");
+    assert_eq!(s.count(TileStatus::Failed), 0, "{:?}", s.records);
+    assert!(s.matched().unwrap() > 0.3, "{:?}", s.matched());
+    assert!(dir.path().join("net.tif").is_file());
+}
