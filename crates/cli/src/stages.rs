@@ -235,10 +235,11 @@ pub fn run_curate(a: CurateArgs, progress: &dyn pipeline::Progress) -> Result<()
     vegetation index, and with --pairs the height above the local ground from the pairs' \
     disparities (trees = vegetation and raised, buildings = raised and not vegetation, water = \
     dark, smooth and low). Measured on the 10 DFC2019 JAX_068 dev images against the LiDAR \
-    classes (BENCHMARKS.md, `seasonstereo masks-score`): tree IoU 0.32 (recall 0.55), building \
-    IoU 0.80; without --pairs only the tree mask is made (colour only). --segmenter \
+    classes (BENCHMARKS.md, `seasonstereo masks-score`): tree IoU 0.36 (recall 0.63), building \
+    IoU 0.78; without --pairs only the tree mask is made (colour only: tree IoU 0.21, recall \
+    0.70). --segmenter \
     pixel-classifier is the previous offline default, a Gaussian mixture trained on procedural \
-    worlds (exact there, tree IoU 0.00 / building IoU 0.26 on the dev images). Images must be \
+    worlds (tree IoU 0.00 / building IoU 0.39 on the dev images). Images must be \
     8-bit (0–255).\n\n\
     Examples:\n  seasonstereo masks --images data/raw_crops -o data/segmentation --segformer \
     checkpoints/openearthmap_segformer_mit-b2.pt\n  seasonstereo masks --images data/raw_crops \

@@ -4,9 +4,10 @@
 //!
 //! - vegetation: chromatic excess green `(2G − R − B)/(R + G + B)` averaged over 7×7 > 0.025
 //!   (canopies are textured; the mean keeps their shadowed leaves);
-//! - tree = vegetation ∧ raised: measured height > 2 m, or no measured height (stereo misses much
-//!   of the canopy) unless the filled DSM says ground level (< 1 m); a missed tree costs the
-//!   training loss more than a masked lawn;
+//! - tree = vegetation ∧ not measured at ground level: measured height > 2 m, or no measured
+//!   height at all (stereo misses much of the canopy, and the filled DSM fills those holes
+//!   ground-first, so it cannot tell); a missed tree costs the training loss more than a masked
+//!   lawn;
 //! - building = filled height > 2.5 m ∧ not vegetation;
 //! - water = dark ∧ smooth ∧ low ∧ not vegetation: mean brightness < 0.12, local std 15×15 <
 //!   0.012, filled height < 1 m, in components the release's clean-up keeps;
@@ -29,8 +30,6 @@ use super::pixel_features::box_mean;
 pub const VEGETATION_EXG: f64 = 0.025;
 /// Measured height above ground of a tree, metres.
 pub const TREE_HEIGHT_M: f32 = 2.0;
-/// Filled height below which an unmeasured green pixel is taken for grass, metres.
-pub const GRASS_HEIGHT_M: f32 = 1.0;
 /// Filled height above ground of a building, metres.
 pub const BUILDING_HEIGHT_M: f32 = 2.5;
 /// Water: brightness (mean of R, G, B in 0–1), local std over 15×15, height.
@@ -86,11 +85,7 @@ pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
             let measured = hg.measured.data()[i];
             let filled = hg.filled.data()[i];
             if vegetation {
-                let raised = if measured.is_finite() {
-                    measured > TREE_HEIGHT_M
-                } else {
-                    !(filled < GRASS_HEIGHT_M)
-                };
+                let raised = !measured.is_finite() || measured > TREE_HEIGHT_M;
                 return if raised { TREE } else { RANGELAND };
             }
             if filled > BUILDING_HEIGHT_M {
