@@ -219,7 +219,7 @@ fn bad_inputs_are_explained() {
 #[test]
 fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
     use pipeline::masks::heights::{ground_level, ImageHeights};
-    let mut iou = [0.0f64; 2];
+    let mut iou = [0.0f64; 3];
     for &seed in &TEST_SEEDS {
         let params = world::WorldParams::new(192, seed);
         let gsd = params.scene.gsd;
@@ -248,6 +248,7 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
         for (k, (kind, id)) in [
             (MaskKind::Tree, class::TREE),
             (MaskKind::Building, class::BUILDING),
+            (MaskKind::Water, class::WATER),
         ]
         .into_iter()
         .enumerate()
@@ -261,9 +262,12 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
         }
     }
     println!(
-        "rules on unseen worlds, exact heights: IoU tree {:.3} building {:.3}",
-        iou[0], iou[1]
+        "rules on unseen worlds, exact heights: IoU tree {:.3} building {:.3} water {:.3}",
+        iou[0], iou[1], iou[2]
     );
+    // Measured 0.57 / 0.65 / 0.44 (the pixel classifier trained on such worlds: 0.73 / 0.34 /
+    // 0.93): heights make the buildings; the world's water is brighter and noisier than most.
     assert!(iou[0] >= 0.5, "tree IoU {}", iou[0]);
-    assert!(iou[1] >= 0.5, "building IoU {}", iou[1]);
+    assert!(iou[1] >= 0.55, "building IoU {}", iou[1]);
+    assert!(iou[2] >= 0.35, "water IoU {}", iou[2]);
 }

@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 
 use camera::Gridding;
 use matching::SgmParams;
+use pipeline::dataset_build::rectify_mask;
 use pipeline::dsm::GridChoice;
 use pipeline::masks::heights::PairIndex;
-use pipeline::masks::score::{score_folder, ImageScore};
+use pipeline::masks::score::{read_masks, score_folder, score_masks, ClassTruth, ImageScore};
 use pipeline::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter};
 use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
 use pipeline::Silent;
@@ -116,6 +117,46 @@ fn rules_with_heights_find_the_trees_and_buildings_of_014_015() {
         );
         assert!(r.tree.iou() > o.tree.iou() + 0.1 && r.building.iou() > o.building.iou() + 0.2);
     }
+    // `dataset build` rectifies the raw-frame tree mask with the pair's homography: the trees it
+    // excludes there are the same (the truth classes rectified alike).
+    let stem = "JAX_068_014_RGB";
+    let [tree, ..] = read_masks(&dir.path().join("rules"), stem).unwrap();
+    let rpc = pipeline::dsm::read_camera(&jax("rpcs/ba/JAX_068_014_RGB.json")).unwrap();
+    let zone = camera::UtmZone::from_lonlat(rpc.lon_offset, rpc.lat_offset);
+    let truth = ClassTruth::read(&jax("truth/JAX_068_DSM.tif"), None, zone).unwrap();
+    let projected = truth.classes_in_image(&rpc, tree.size());
+    let (h_left, _) = raster::formats::read_homographies(
+        pairs.join("homography/JAX_068_014_RGB-JAX_068_015_RGB.npz"),
+    )
+    .unwrap();
+    let size = raster::read_image(pairs.join("L/JAX_068_014_RGB-JAX_068_015_RGB.iio"))
+        .unwrap()
+        .size();
+    let class = |k: f32| {
+        let m = raster::Mask::from_fn(tree.width(), tree.height(), |x, y| {
+            projected.get(x, y, 0) == k
+        });
+        rectify_mask(&m, &h_left, size).unwrap()
+    };
+    let (t, g, b) = (class(5.0), class(2.0), class(6.0));
+    let rect_tree = rectify_mask(&tree, &h_left, size).unwrap();
+    let labels = raster::Image::from_fn(size.0, size.1, |x, y| {
+        [(&t, 5.0), (&g, 2.0), (&b, 6.0)]
+            .iter()
+            .find(|(m, _)| m.get(x, y))
+            .map_or(f32::NAN, |(_, k)| *k)
+    });
+    let none = raster::Mask::filled(size.0, size.1, false);
+    let rectified = score_masks(stem, &labels, &rect_tree, &none, &none);
+    eprintln!(
+        "{stem} rectified: tree IoU {:.3} R {:.3} (raw frame {:.3} / {:.3})",
+        rectified.tree.iou(),
+        rectified.tree.recall(),
+        rules[0].tree.iou(),
+        rules[0].tree.recall()
+    );
+    assert!((rectified.tree.iou() - rules[0].tree.iou()).abs() < 0.03);
+    assert!((rectified.tree.recall() - rules[0].tree.recall()).abs() < 0.03);
     // The records say where the heights came from.
     let record =
         std::fs::read_to_string(dir.path().join("rules/records/JAX_068_015_RGB.json")).unwrap();
