@@ -806,7 +806,10 @@ fn data_stages_teacher_curate_masks() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("offline rules") && out.contains("colour only"), "{out}");
+    assert!(
+        out.contains("offline rules") && out.contains("colour only"),
+        "{out}"
+    );
     for class in ["water", "tree", "building"] {
         let m = seg.join(format!(
             "{class}_segmentation/masks/WORLD_3_A-WORLD_3_B_mask.png"

@@ -16,8 +16,10 @@
 //! <out>/masks.json                                    which segmenter made the folder
 //! ```
 //!
-//! The segmenter is SegFormer (OpenEarthMap mit-b2, `nn::segformer`) with weights, or the offline
-//! [`offline::PixelClassifier`] trained on the procedural world; both go through the same
+//! The segmenter is SegFormer (OpenEarthMap mit-b2, `nn::segformer`) with weights (preferred),
+//! the offline [`rules`] for real imagery (colour + height above ground from the pairs'
+//! disparities, [`heights`]; scored against real labels by [`score`]), or the offline
+//! [`offline::PixelClassifier`] trained on the procedural world; all go through the same
 //! post-processing (`nn::segformer::postprocess`: small-component removal, hole filling,
 //! building dilation, areas in percent of the image). Masks stay in the frame of the image they
 //! were computed on: `dataset build` rectifies raw-image masks with each pair's homographies.
