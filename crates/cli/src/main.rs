@@ -68,8 +68,11 @@ enum Command {
     /// intersection of the two top-K rankings; resumable and shardable.
     Curate(stages::CurateArgs),
     /// Water, tree and building masks from one segmentation per image (SegFormer with weights,
-    /// or the offline classifier); resumable and shardable.
+    /// or the offline rules on colour and height above ground); resumable and shardable.
     Masks(stages::MasksArgs),
+    /// Score a `masks` folder against DFC2019 classes (tree, building, ground IoU / precision /
+    /// recall), the truth projected into each image through its DSM and RPCs.
+    MasksScore(stages::MasksScoreArgs),
     /// Four seasonal variants of every image of the selected pairs (centre crop, built-in model
     /// or a generative API), checked for geometric fidelity and rectified; resumable, shardable.
     Synthesize(dataset::SynthesizeArgs),
@@ -605,6 +608,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Teacher(a) => stages::run_teacher(a, &progress)?,
         Command::Curate(a) => stages::run_curate(a, &progress)?,
         Command::Masks(a) => stages::run_masks(a, &progress)?,
+        Command::MasksScore(a) => stages::run_masks_score(a)?,
         Command::Synthesize(a) => dataset::run_synthesize_command(a, &progress)?,
         Command::Dataset(a) => dataset::run_dataset(a, &progress)?,
         Command::Train(a) => train::run(a)?,

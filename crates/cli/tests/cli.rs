@@ -822,7 +822,11 @@ fn data_stages_teacher_curate_masks() {
         seg.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("offline pixel classifier"));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("offline rules") && out.contains("colour only"),
+        "{out}"
+    );
     for class in ["water", "tree", "building"] {
         let m = seg.join(format!(
             "{class}_segmentation/masks/WORLD_3_A-WORLD_3_B_mask.png"

@@ -510,7 +510,7 @@ fn clamp_u8(im: &Image) -> Image {
 
 /// Warps a raw-frame mask into the rectified frame (bilinear on 0/1, > 0.5: nearest up to the
 /// half-pixel border); outside the raw image it is false.
-fn rectify_mask(mask: &Mask, h: &Homography, size: (usize, usize)) -> Result<Mask> {
+pub fn rectify_mask(mask: &Mask, h: &Homography, size: (usize, usize)) -> Result<Mask> {
     let (warped, inside) = warp_homography(&mask.to_image(), h, size.0, size.1)?;
     let data = warped
         .data()

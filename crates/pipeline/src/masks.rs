@@ -16,15 +16,21 @@
 //! <out>/masks.json                                    which segmenter made the folder
 //! ```
 //!
-//! The segmenter is SegFormer (OpenEarthMap mit-b2, `nn::segformer`) with weights, or the offline
-//! [`offline::PixelClassifier`] trained on the procedural world; both go through the same
+//! The segmenter is SegFormer (OpenEarthMap mit-b2, `nn::segformer`) with weights (preferred),
+//! the offline [`rules`] for real imagery (colour + height above ground from the pairs'
+//! disparities, [`heights`]; scored against real labels by [`score`]), or the offline
+//! [`offline::PixelClassifier`] trained on the procedural world; all go through the same
 //! post-processing (`nn::segformer::postprocess`: small-component removal, hole filling,
 //! building dilation, areas in percent of the image). Masks stay in the frame of the image they
 //! were computed on: `dataset build` rectifies raw-image masks with each pair's homographies.
 //! Resumable (finished images skipped) and shardable over the sorted image list.
 
+pub mod heights;
 pub mod offline;
 pub mod pixel_features;
+pub mod project;
+pub mod rules;
+pub mod score;
 
 use std::path::{Path, PathBuf};
 
@@ -51,6 +57,16 @@ pub trait ImageSegmenter {
     fn name(&self) -> String;
     /// Masks at the image's own size; `image` holds 8-bit values (0–255), 1–4 channels.
     fn segment(&self, image: &Image) -> Result<Segmentation>;
+    /// [`ImageSegmenter::segment`] of a listed image, with what the record should say about the
+    /// inputs it used beyond the pixels (e.g. heights); segmenters that need only the pixels keep
+    /// this default.
+    fn segment_input(
+        &self,
+        image: &Image,
+        _input: &InputImage,
+    ) -> Result<(Segmentation, serde_json::Value)> {
+        Ok((self.segment(image)?, serde_json::Value::Null))
+    }
 }
 
 /// SegFormer with the release's weights.
@@ -129,6 +145,69 @@ impl ImageSegmenter for OfflineSegmenter {
             tree: mask(1)?,
             building: mask(2)?,
         })
+    }
+}
+
+/// The offline default for real imagery: [`rules`] on colour and, when the pairs are given, on
+/// the height above ground from their disparities ([`heights`]).
+pub struct RulesSegmenter {
+    pub options: [MaskOptions; 3],
+    /// Rectified pairs with disparities; `None`: colour only.
+    pub pairs: Option<heights::PairIndex>,
+}
+
+impl RulesSegmenter {
+    pub fn new(pairs: Option<heights::PairIndex>) -> Self {
+        RulesSegmenter {
+            options: MaskKind::ALL.map(MaskOptions::defaults),
+            pairs,
+        }
+    }
+}
+
+/// Measured on the 10 DFC2019 JAX_068 development images against the LiDAR classes
+/// (BENCHMARKS.md, "Masks on real imagery"), for `--help` and the records.
+pub const RULES_REAL_SCORES: &str =
+    "DFC2019 JAX_068 dev, 10 images: tree IoU 0.36 (recall 0.63), building IoU 0.78 with heights; colour only tree IoU 0.21 (recall 0.70)";
+
+impl ImageSegmenter for RulesSegmenter {
+    fn name(&self) -> String {
+        let heights = match &self.pairs {
+            Some(_) => "with heights above ground from the stereo pairs",
+            None => "colour only: no pairs given, no building or water mask",
+        };
+        format!("offline rules v1 (vegetation index + height above ground; {heights}; {RULES_REAL_SCORES})")
+    }
+
+    fn segment(&self, image: &Image) -> Result<Segmentation> {
+        rules::segment(image, None, &self.options)
+    }
+
+    fn segment_input(
+        &self,
+        image: &Image,
+        input: &InputImage,
+    ) -> Result<(Segmentation, serde_json::Value)> {
+        let Some(index) = &self.pairs else {
+            return Ok((
+                self.segment(image)?,
+                json!({"heights": "none (colour only)"}),
+            ));
+        };
+        match heights::image_heights(index, &input.stem, image.size())? {
+            Some(h) => {
+                let known = |im: &Image| {
+                    im.data().iter().filter(|v| v.is_finite()).count() as f64
+                        / im.data().len().max(1) as f64
+                };
+                let note = json!({"heights": {"pairs": h.pairs, "measured_share": known(&h.measured), "filled_share": known(&h.filled)}});
+                Ok((rules::segment(image, Some(&h), &self.options)?, note))
+            }
+            None => Ok((
+                self.segment(image)?,
+                json!({"heights": format!("none: {} is in no pair with a disparity (colour only)", input.stem)}),
+            )),
+        }
     }
 }
 
@@ -263,6 +342,7 @@ pub fn write_segmentation(
     image: &InputImage,
     seg: &Segmentation,
     segmenter: &str,
+    inputs: &serde_json::Value,
 ) -> Result<()> {
     let mut lines = serde_json::Map::new();
     for kind in MaskKind::ALL {
@@ -289,7 +369,7 @@ pub fn write_segmentation(
     )?;
     write_json(
         &record_path(out_dir, &image.stem),
-        &json!({"image": image.path.display().to_string(), "segmenter": segmenter, "percentages": lines}),
+        &json!({"image": image.path.display().to_string(), "segmenter": segmenter, "inputs": inputs, "percentages": lines}),
     )
 }
 
@@ -370,8 +450,11 @@ pub fn run_masks(opts: &MasksOptions, progress: &dyn Progress) -> Result<BatchSu
         |im| {
             let raw = raster::read_image(&im.path)
                 .with_context(|| format!("reading {}", im.path.display()))?;
-            let seg = opts.segmenter.segment(&to_8bit(&raw, &im.path)?)?;
-            write_segmentation(&opts.out_dir, im, &seg, &name)
+            let (seg, inputs) = opts
+                .segmenter
+                .segment_input(&to_8bit(&raw, &im.path)?, im)
+                .with_context(|| format!("segmenting {}", im.path.display()))?;
+            write_segmentation(&opts.out_dir, im, &seg, &name, &inputs)
         },
         |im| im.path.display().to_string(),
     )?;

@@ -213,3 +213,61 @@ fn bad_inputs_are_explained() {
     let err = format!("{:#}", pipeline::masks::list_images(&images).unwrap_err());
     assert!(err.contains("same stem"), "{err}");
 }
+
+/// The rules segmenter on the procedural world, with the world's exact heights above the ground
+/// (what a perfect teacher would give): its classes remain a test on synthetic data.
+#[test]
+fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
+    use pipeline::masks::heights::{ground_level, ImageHeights};
+    let mut iou = [0.0f64; 3];
+    for &seed in &TEST_SEEDS {
+        let params = world::WorldParams::new(192, seed);
+        let gsd = params.scene.gsd;
+        let w = world::generate(&params, &world::Neutral, &|_, _| {}).unwrap();
+        let ground = ground_level(&w.left.height, gsd);
+        let above = raster::Image::new(
+            192,
+            192,
+            1,
+            w.left
+                .height
+                .data()
+                .iter()
+                .zip(ground.data())
+                .map(|(a, g)| a - g)
+                .collect(),
+        )
+        .unwrap();
+        let heights = ImageHeights {
+            measured: above.clone(),
+            filled: above,
+            pairs: vec![],
+        };
+        let options = MaskKind::ALL.map(nn::segformer::MaskOptions::defaults);
+        let s = pipeline::masks::rules::segment(&w.left.image, Some(&heights), &options).unwrap();
+        for (k, (kind, id)) in [
+            (MaskKind::Tree, class::TREE),
+            (MaskKind::Building, class::BUILDING),
+            (MaskKind::Water, class::WATER),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let m = &s.get(kind).mask;
+            let truth = w.left.classes.data().iter().map(|&c| c == id as f32);
+            let (inter, union) = m.data().iter().zip(truth).fold((0, 0), |(i, u), (&a, b)| {
+                (i + (a && b) as usize, u + (a || b) as usize)
+            });
+            iou[k] += inter as f64 / union.max(1) as f64 / TEST_SEEDS.len() as f64;
+        }
+    }
+    println!(
+        "rules on unseen worlds, exact heights: IoU tree {:.3} building {:.3} water {:.3}",
+        iou[0], iou[1], iou[2]
+    );
+    // Measured 0.57 / 0.65 / 0.44 (the pixel classifier trained on such worlds: 0.73 / 0.34 /
+    // 0.93): heights make the buildings; the world's water is brighter and noisier than most.
+    assert!(iou[0] >= 0.5, "tree IoU {}", iou[0]);
+    assert!(iou[1] >= 0.55, "building IoU {}", iou[1]);
+    assert!(iou[2] >= 0.35, "water IoU {}", iou[2]);
+}

@@ -25,7 +25,7 @@ pub const NAMES: [&str; FEATURES] = [
 ];
 
 /// Means over `(2r+1)²` windows truncated at the borders (summed-area table).
-fn box_mean(plane: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
+pub(crate) fn box_mean(plane: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
     let mut sat = vec![0.0f64; (w + 1) * (h + 1)];
     for y in 0..h {
         let mut row = 0.0;
