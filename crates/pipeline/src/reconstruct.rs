@@ -231,7 +231,7 @@ pub fn reconstruct(
         opts.rpc_right.as_deref(),
         "right",
     )?;
-    let (alt_range, _) = altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
+    let (alt_range, alt_source) = altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
     let (w, h) = left.size();
     let roi = match (opts.roi, opts.roi_lonlat) {
         (Some(_), Some(_)) => bail!("give the region in pixels or in lon/lat, not both"),
@@ -303,7 +303,9 @@ pub fn reconstruct(
             right: &right,
             rpc_left: &rpc_left,
             rpc_right: &rpc_right,
+            rpc_files: [opts.rpc_left.as_deref(), opts.rpc_right.as_deref()],
             alt_range,
+            alt_source,
             matcher: &matcher,
             grid: &grid,
             gridding: opts.gridding,

@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use camera::rectify::{rectify_pair, Roi};
+use camera::rectify::{rectify_pair, Rectification, Roi};
 use camera::RpcModel;
 use raster::formats::{read_tiff, write_homographies, write_npy};
 use raster::Image;
@@ -162,6 +162,64 @@ pub(crate) fn file_stem(path: &Path) -> Result<String> {
         .with_context(|| format!("{}: cannot name the pair after this path", path.display()))
 }
 
+/// Fraction of the region of interest's rectified box that the rectified right image covers.
+pub(crate) fn right_coverage(right: &Image, rect: &Rectification) -> f64 {
+    let (rx, ry, rw, rh) = rect.roi_in_frame;
+    let mut covered = 0usize;
+    for y in ry..(ry + rh).min(rect.size.1) {
+        for x in rx..(rx + rw).min(rect.size.0) {
+            covered += !right.get(x, y, 0).is_nan() as usize;
+        }
+    }
+    covered as f64 / (rw * rh).max(1) as f64
+}
+
+/// What `rectify/<stem>.json` says of a rectified pair (read by `masks --pairs` and `eval`).
+pub(crate) struct RectifyRecord<'a> {
+    pub stem: &'a str,
+    pub left: &'a Path,
+    pub right: &'a Path,
+    pub rpc_left: Option<&'a Path>,
+    pub rpc_right: Option<&'a Path>,
+    pub roi: Roi,
+    pub alt_range: (f64, f64),
+    pub alt_source: &'a str,
+    pub right_coverage: f64,
+    /// The rectified left and right images and the homographies.
+    pub files: [&'a Path; 3],
+}
+
+impl RectifyRecord<'_> {
+    pub fn to_json(&self, rect: &Rectification) -> serde_json::Value {
+        let (rx, ry, rw, rh) = rect.roi_in_frame;
+        let (lo, hi) = rect.disparity_range;
+        json!({
+            "stem": self.stem,
+            "left": self.left.display().to_string(),
+            "right": self.right.display().to_string(),
+            "rpc_left": self.rpc_left.map(|p| p.display().to_string()),
+            "rpc_right": self.rpc_right.map(|p| p.display().to_string()),
+            "roi": self.roi,
+            "alt_range": [self.alt_range.0, self.alt_range.1],
+            "alt_range_source": self.alt_source,
+            "disparity_range": [lo, hi],
+            "size": [rect.size.0, rect.size.1],
+            "roi_in_frame": {"x": rx, "y": ry, "width": rw, "height": rh},
+            "flipped": rect.flipped,
+            "pixels_per_metre": rect.pixels_per_metre,
+            "max_row_error_px": rect.max_row_error,
+            "right_coverage": self.right_coverage,
+            "Hleft": rect.h_left.0,
+            "Hright": rect.h_right.0,
+            "files": {
+                "left": self.files[0].display().to_string(),
+                "right": self.files[1].display().to_string(),
+                "homography": self.files[2].display().to_string(),
+            },
+        })
+    }
+}
+
 /// Rectifies a raw pair from its cameras and writes `L/<stem>.iio`, `R/<stem>.iio`,
 /// `homography/<stem>.npz` and `rectify/<stem>.json` under `opts.out_dir` (every file written
 /// atomically).
@@ -198,14 +256,7 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
     })?;
     let rect = &pair.rectification;
 
-    let (rx, ry, rw, rh) = rect.roi_in_frame;
-    let mut covered = 0usize;
-    for y in ry..(ry + rh).min(pair.size.1) {
-        for x in rx..(rx + rw).min(pair.size.0) {
-            covered += !pair.right.get(x, y, 0).is_nan() as usize;
-        }
-    }
-    let right_coverage = covered as f64 / (rw * rh).max(1) as f64;
+    let right_coverage = right_coverage(&pair.right, rect);
 
     let dir = &opts.out_dir;
     let left_path = dir.join("L").join(format!("{stem}.iio"));
@@ -215,34 +266,19 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
     write_npy(&left_path, &pair.left)?;
     write_npy(&right_path, &pair.right)?;
     write_homographies(&homography, &pair.h_left, &pair.h_right)?;
-    let (lo, hi) = pair.disparity_range;
-    write_json(
-        &report,
-        &json!({
-            "stem": stem,
-            "left": opts.left.display().to_string(),
-            "right": opts.right.display().to_string(),
-            "rpc_left": opts.rpc_left.as_ref().map(|p| p.display().to_string()),
-            "rpc_right": opts.rpc_right.as_ref().map(|p| p.display().to_string()),
-            "roi": roi,
-            "alt_range": [alt_range.0, alt_range.1],
-            "alt_range_source": alt_source,
-            "disparity_range": [lo, hi],
-            "size": [pair.size.0, pair.size.1],
-            "roi_in_frame": {"x": rx, "y": ry, "width": rw, "height": rh},
-            "flipped": rect.flipped,
-            "pixels_per_metre": rect.pixels_per_metre,
-            "max_row_error_px": rect.max_row_error,
-            "right_coverage": right_coverage,
-            "Hleft": pair.h_left.0,
-            "Hright": pair.h_right.0,
-            "files": {
-                "left": left_path.display().to_string(),
-                "right": right_path.display().to_string(),
-                "homography": homography.display().to_string(),
-            },
-        }),
-    )?;
+    let record = RectifyRecord {
+        stem: &stem,
+        left: &opts.left,
+        right: &opts.right,
+        rpc_left: opts.rpc_left.as_deref(),
+        rpc_right: opts.rpc_right.as_deref(),
+        roi,
+        alt_range,
+        alt_source,
+        right_coverage,
+        files: [&left_path, &right_path, &homography],
+    };
+    write_json(&report, &record.to_json(rect))?;
     Ok(RectifySummary {
         stem,
         left: left_path,

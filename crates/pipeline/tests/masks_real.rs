@@ -6,7 +6,6 @@
 
 use std::path::{Path, PathBuf};
 
-use camera::Gridding;
 use matching::SgmParams;
 use pipeline::dataset_build::rectify_mask;
 use pipeline::dsm::GridChoice;
@@ -54,21 +53,19 @@ fn rules_with_heights_find_the_trees_and_buildings_of_014_015() {
     let pairs = dir.path().join("pairs");
     reconstruct(
         &ReconstructOptions {
-            left: images.join("JAX_068_014_RGB.tif"),
-            right: images.join("JAX_068_015_RGB.tif"),
             rpc_left: Some(jax("rpcs/ba/JAX_068_014_RGB.json")),
             rpc_right: Some(jax("rpcs/ba/JAX_068_015_RGB.json")),
-            roi: None,
-            alt_range: None,
-            matcher: Matcher::Classical(SgmParams::default()),
-            output: dir.path().join("dsm.tif"),
             work_dir: Some(pairs.clone()),
-            grid: GridChoice::Like(jax("truth/JAX_068_DSM.tif")),
-            gridding: Gridding::Median,
             fill_holes: None,
             median_filter: None,
-            border: 0,
-            truth: None,
+            keep_intermediates: true,
+            ..ReconstructOptions::new(
+                images.join("JAX_068_014_RGB.tif"),
+                images.join("JAX_068_015_RGB.tif"),
+                Matcher::Classical(SgmParams::default()),
+                GridChoice::Like(jax("truth/JAX_068_DSM.tif")),
+                dir.path().join("dsm.tif"),
+            )
         },
         &Silent,
     )

@@ -65,6 +65,10 @@ impl RawImage {
         self.size
     }
 
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// Number of bands.
     pub fn bands(&self) -> usize {
         self.bands

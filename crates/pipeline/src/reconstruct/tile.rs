@@ -19,6 +19,8 @@ use super::plan::Tile;
 use super::raw::RawImage;
 use crate::dsm::valid_pixels;
 use crate::predict::{predict_monster, predict_sgm};
+use crate::rectify::{right_coverage, RectifyRecord};
+use crate::world_io::write_json;
 use crate::Silent;
 use nn::infer::MonsterPredictor;
 
@@ -36,7 +38,11 @@ pub struct Scene<'a> {
     pub right: &'a RawImage,
     pub rpc_left: &'a RpcModel,
     pub rpc_right: &'a RpcModel,
+    /// The JSON cameras, when the images' tags are not used (for the rectify records).
+    pub rpc_files: [Option<&'a Path>; 2],
     pub alt_range: (f64, f64),
+    /// Where the altitude range came from.
+    pub alt_source: &'a str,
     pub matcher: &'a TileMatcher,
     pub grid: &'a DsmGrid,
     pub gridding: Gridding,
@@ -211,7 +217,7 @@ fn match_and_grid(
         } else {
             format!("{}_{}", scene.stem, tile.id)
         };
-        keep_files(dir, &name, &left, &right, &disparity, rect)?;
+        keep_files(scene, dir, &name, tile, &left, &right, &disparity, rect)?;
     }
     drop((left, right));
 
@@ -268,19 +274,41 @@ fn warp_window(
     Ok(Some(warp_nan(&window, &h_window, size)?))
 }
 
-/// Writes a tile's rectified pair, homographies and disparity in the layout `eval` reads.
+/// Writes a tile's rectified pair, homographies, rectify record and disparity in the layout
+/// `eval` and `masks --pairs` read.
+#[allow(clippy::too_many_arguments)]
 fn keep_files(
+    scene: &Scene,
     dir: &Path,
     name: &str,
+    tile: &Tile,
     left: &Image,
     right: &Image,
     disparity: &Image,
     rect: &Rectification,
 ) -> Result<()> {
     let file = |sub: &str, ext: &str| dir.join(sub).join(format!("{name}.{ext}"));
-    write_npy(file("L", "iio"), left)?;
-    write_npy(file("R", "iio"), right)?;
+    let (l, r, h) = (
+        file("L", "iio"),
+        file("R", "iio"),
+        file("homography", "npz"),
+    );
+    write_npy(&l, left)?;
+    write_npy(&r, right)?;
     write_npy(file("disparity", "iio"), disparity)?;
-    write_homographies(file("homography", "npz"), &rect.h_left, &rect.h_right)?;
+    write_homographies(&h, &rect.h_left, &rect.h_right)?;
+    let record = RectifyRecord {
+        stem: name,
+        left: scene.left.path(),
+        right: scene.right.path(),
+        rpc_left: scene.rpc_files[0],
+        rpc_right: scene.rpc_files[1],
+        roi: tile.extended,
+        alt_range: scene.alt_range,
+        alt_source: scene.alt_source,
+        right_coverage: right_coverage(right, rect),
+        files: [&l, &r, &h],
+    };
+    write_json(&file("rectify", "json"), &record.to_json(rect))?;
     Ok(())
 }
