@@ -56,7 +56,9 @@ pub struct DsmArgs {
     compare: Option<PathBuf>,
 }
 
-fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
+/// `XMIN,YMIN,XMAX,YMAX` with MIN < MAX: UTM bounds here, lon/lat bounds for `reconstruct
+/// --roi-lonlat`; `names` spells the four values in the messages.
+pub(crate) fn parse_box(s: &str, names: &str) -> Result<[f64; 4], String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|p| {
@@ -67,11 +69,13 @@ fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
         .collect::<Result<_, _>>()?;
     match v[..] {
         [a, b, c, d] if a < c && b < d => Ok([a, b, c, d]),
-        [_, _, _, _] => Err(format!(
-            "bounds {s:?} must satisfy XMIN < XMAX and YMIN < YMAX"
-        )),
-        _ => Err(format!("expected XMIN,YMIN,XMAX,YMAX, got {s:?}")),
+        [_, _, _, _] => Err(format!("{names} {s:?} must have each MIN < MAX")),
+        _ => Err(format!("expected {names}, got {s:?}")),
     }
+}
+
+fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
+    parse_box(s, "XMIN,YMIN,XMAX,YMAX")
 }
 
 pub fn run(a: DsmArgs) -> Result<()> {

@@ -264,21 +264,7 @@ fn gib_to_bytes(gib: f64) -> Result<u64> {
 
 /// `LON_MIN,LAT_MIN,LON_MAX,LAT_MAX`.
 fn parse_lonlat(s: &str) -> Result<[f64; 4], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| {
-            t.trim()
-                .parse::<f64>()
-                .map_err(|e| format!("{t:?} in {s:?}: {e}"))
-        })
-        .collect::<Result<_, _>>()?;
-    match v[..] {
-        [a, b, c, d] if c > a && d > b => Ok([a, b, c, d]),
-        _ => Err(format!(
-            "expected LON_MIN,LAT_MIN,LON_MAX,LAT_MAX with MIN < MAX, e.g. \
-             -81.665,30.348,-81.660,30.352, got {s:?}"
-        )),
-    }
+    crate::dsm::parse_box(s, "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX")
 }
 
 #[derive(Args)]

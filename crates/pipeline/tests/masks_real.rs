@@ -4,7 +4,7 @@
 //! the images. Bounds sit below what `scripts/jax-dev-masks.sh` measures (BENCHMARKS.md, "Masks
 //! on real imagery") and above what the procedural-world pixel classifier reaches.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use matching::SgmParams;
 use pipeline::dataset_build::rectify_mask;
@@ -15,17 +15,8 @@ use pipeline::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter,
 use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
 use pipeline::Silent;
 
-fn jax(rel: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/dfc2019-jax068-dev")
-        .join(rel);
-    assert!(
-        p.exists(),
-        "development data {} is missing: these tests need /work/shared/data",
-        p.display()
-    );
-    p
-}
+mod common;
+use common::jax;
 
 fn masks_of(images: &Path, out: &Path, segmenter: Box<dyn ImageSegmenter>) -> Vec<ImageScore> {
     run_masks(

@@ -5,7 +5,7 @@
 //! Bounds are set with margin above what the default matcher reaches (BENCHMARKS.md, "Real
 //! imagery"), below what the chain reached before speckle removal and MGM (4.4 / 10.1 m).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use camera::UtmZone;
 use matching::SgmParams;
@@ -13,17 +13,8 @@ use pipeline::dsm::GridChoice;
 use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
 use pipeline::Silent;
 
-fn jax(rel: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/dfc2019-jax068-dev")
-        .join(rel);
-    assert!(
-        p.exists(),
-        "development data {} is missing: these tests need /work/shared/data",
-        p.display()
-    );
-    p
-}
+mod common;
+use common::jax;
 
 /// The default options for pair `l`–`r` on the truth's grid, scored against it.
 fn options(l: &str, r: &str, out: &Path) -> ReconstructOptions {
