@@ -146,6 +146,9 @@ pub struct ReconstructSummary {
     /// Tiles run at once, and the largest tile's estimated memory, bytes.
     pub in_flight: usize,
     pub tile_memory: u64,
+    /// Memory the assembly of the DSM needs, bytes: it holds the whole grid (merge, hole
+    /// filling, median filter), outside the tiles' budget.
+    pub merge_memory: u64,
     /// The DSM, once every tile has a record.
     pub dsm: Option<DsmSummary>,
     /// Benchmark scores against the truth, when one was given.
@@ -267,6 +270,18 @@ pub fn reconstruct(
         },
         border: opts.border,
     };
+    // The tiles stay inside the budget by construction; the assembly holds the whole grid.
+    let merge_memory = (grid.width * grid.height) as u64 * MERGE_BYTES_PER_CELL;
+    if merge_memory > opts.max_memory {
+        bail!(
+            "assembling the {}x{}-cell DSM needs about {:.2} GiB, more than --max-memory {:.2} \
+             GiB: use a coarser --resolution, a smaller --roi, or raise --max-memory",
+            grid.width,
+            grid.height,
+            gib(merge_memory),
+            gib(opts.max_memory)
+        );
+    }
     claim_work_folder(&work, &settings)?;
     let tiles_dir = work.join("tiles");
     let record_path = |t: &Tile| tiles_dir.join(format!("{}.json", t.id));
@@ -412,6 +427,7 @@ pub fn reconstruct(
         missing,
         in_flight,
         tile_memory: largest,
+        merge_memory,
         dsm: None,
         scores: None,
         seconds,
@@ -458,6 +474,10 @@ pub fn reconstruct(
     }
     Ok(summary)
 }
+
+/// Peak bytes per DSM cell while assembling: the mosaic (height + count), the filled and the
+/// filtered copies.
+const MERGE_BYTES_PER_CELL: u64 = 18;
 
 fn gib(bytes: u64) -> f64 {
     bytes as f64 / (1u64 << 30) as f64
