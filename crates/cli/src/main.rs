@@ -3,6 +3,7 @@
 //! This binary only parses arguments and draws progress; the work lives in the library crates.
 
 mod bars;
+mod bench;
 mod dataset;
 mod demo;
 mod dsm;
@@ -50,6 +51,9 @@ enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).
     Score(reconstruct::ScoreArgs),
+    /// Time the networks (MonSter++, SegFormer, DINOv3, a training step) with random weights:
+    /// median and min over N runs after a warm-up, peak RSS, --json.
+    Bench(bench::BenchArgs),
     /// Turn a rectified disparity into a georeferenced DSM (RPC triangulation, highest point per
     /// cell), on a ground truth's grid or on a UTM grid of your choosing.
     Dsm(dsm::DsmArgs),
@@ -605,6 +609,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Dsm(a) => dsm::run(a)?,
         Command::Reconstruct(a) => reconstruct::run(a, &progress)?,
         Command::Score(a) => reconstruct::run_score(a)?,
+        Command::Bench(a) => bench::run(a)?,
         Command::Teacher(a) => stages::run_teacher(a, &progress)?,
         Command::Curate(a) => stages::run_curate(a, &progress)?,
         Command::Masks(a) => stages::run_masks(a, &progress)?,

@@ -979,3 +979,39 @@ fn reconstruct_a_real_pair_then_score_it_on_the_dfc2019_truth() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--like"), "{}", stderr(&o));
 }
+
+/// `bench` times a workload after a warm-up and prints one JSON line; bad presets are refused.
+#[test]
+fn bench_times_a_network_pass_and_prints_json() {
+    let o = seasonstereo(&[
+        "bench",
+        "monsterpp",
+        "--config",
+        "tiny",
+        "--height",
+        "64",
+        "--width",
+        "64",
+        "--iters",
+        "7",
+        "--runs",
+        "2",
+        "--device",
+        "cpu",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&o.stdout).trim()).expect("one JSON line");
+    assert_eq!(v["workload"], "monsterpp");
+    assert_eq!(v["times_s"].as_array().unwrap().len(), 2);
+    let (median, min) = (
+        v["median_s"].as_f64().unwrap(),
+        v["min_s"].as_f64().unwrap(),
+    );
+    assert!(min > 0.0 && median >= min, "{v}");
+    assert!(v["peak_rss_mib"].as_f64().unwrap() > 1.0, "{v}");
+    let o = seasonstereo(&["bench", "segformer", "--config", "mit-b9"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("mit-b2"), "{}", stderr(&o));
+}

@@ -15,6 +15,7 @@
 //! - [`data`]: deterministic batches from `(seed, step)`; [`trainer`]: the loop, validation,
 //!   checkpoints ([`checkpoint`]), exact resume, Ctrl-C; [`metrics`]: CSV logs and scores.
 
+pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod data;
