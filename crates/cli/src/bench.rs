@@ -98,17 +98,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
         Ok(t.elapsed().as_secs_f64())
     };
     let warmup = timed(&mut work)?;
-    let mut times = (0..a.runs)
+    let times = (0..a.runs)
         .map(|_| timed(&mut work))
         .collect::<Result<Vec<f64>>>()?;
-    let listed = times.clone();
-    times.sort_by(f64::total_cmp);
-    let median = if times.len() % 2 == 1 {
-        times[times.len() / 2]
-    } else {
-        0.5 * (times[times.len() / 2 - 1] + times[times.len() / 2])
-    };
-    let min = times[0];
+    let median = pipeline::eval::aggregate::median(&times).expect("at least one run");
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let peak = train::metrics::peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64);
     let name = a
         .workload
@@ -124,7 +118,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             "workload": name, "config": preset, "shape": shape, "iters": iters,
             "max_disp": a.max_disp, "batch": batch, "device": a.device.name,
             "threads": std::thread::available_parallelism().map_or(1, |n| n.get()), "runs": a.runs, "warmup_s": warmup,
-            "median_s": median, "min_s": min, "times_s": listed, "peak_rss_mib": peak,
+            "median_s": median, "min_s": min, "times_s": times, "peak_rss_mib": peak,
         });
         println!("{v}");
     } else {

@@ -286,10 +286,12 @@ pub fn reconstruct(
     let tiles_dir = work.join("tiles");
     let record_path = |t: &Tile| tiles_dir.join(format!("{}.json", t.id));
     let part_path = |t: &Tile| tiles_dir.join(format!("{}.tif", t.id));
-    let finished = |t: &Tile| -> Option<TileRecord> {
+    // A tile's record, if it has one for this plan.
+    let record_of = |t: &Tile| -> Option<TileRecord> {
         let text = std::fs::read_to_string(record_path(t)).ok()?;
-        let r: TileRecord = serde_json::from_str(&text).ok()?;
-        (r.tile == *t && r.status != TileStatus::Failed).then_some(r)
+        serde_json::from_str::<TileRecord>(&text)
+            .ok()
+            .filter(|r| r.tile == *t)
     };
 
     let mut ran = 0;
@@ -298,7 +300,10 @@ pub fn reconstruct(
     if !opts.merge_only {
         let todo: Vec<&Tile> = tiles
             .iter()
-            .filter(|t| opts.shard.contains(t.index) && finished(t).is_none())
+            .filter(|t| {
+                opts.shard.contains(t.index)
+                    && record_of(t).is_none_or(|r| r.status == TileStatus::Failed)
+            })
             .collect();
         // Held by the process besides the tiles (images' headers, records, thread stacks).
         let base = 256 << 20;
@@ -375,7 +380,7 @@ pub fn reconstruct(
             let Some(tile) = todo.get(i) else { return };
             let (record, cells) = match &rects[i] {
                 Ok(rect) => run_tile(&scene, tile, rect, memory[i]),
-                Err(e) => (failed_record(tile, e), None),
+                Err(e) => (TileRecord::failed(tile, e), None),
             };
             let saved = (|| -> Result<()> {
                 if let Some(cells) = &cells {
@@ -410,11 +415,7 @@ pub fn reconstruct(
     let mut records = Vec::with_capacity(tiles.len());
     let mut missing = Vec::new();
     for t in &tiles {
-        match std::fs::read_to_string(record_path(t))
-            .ok()
-            .and_then(|s| serde_json::from_str::<TileRecord>(&s).ok())
-            .filter(|r| r.tile == *t)
-        {
+        match record_of(t) {
             Some(r) => records.push(r),
             None => missing.push(t.id.clone()),
         }
@@ -481,22 +482,6 @@ const MERGE_BYTES_PER_CELL: u64 = 18;
 
 fn gib(bytes: u64) -> f64 {
     bytes as f64 / (1u64 << 30) as f64
-}
-
-/// The record of a tile that could not even be rectified.
-fn failed_record(tile: &Tile, e: &anyhow::Error) -> TileRecord {
-    TileRecord {
-        tile: tile.clone(),
-        status: TileStatus::Failed,
-        error: Some(format!("{e:#}")),
-        seconds: 0.0,
-        disparity_range: None,
-        rectified_size: None,
-        matched: None,
-        points: 0,
-        memory_bytes: 0,
-        cells: None,
-    }
 }
 
 /// Writes `scene.json`, or checks that the folder's tiles were made with the same settings.

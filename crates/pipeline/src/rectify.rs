@@ -17,11 +17,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use camera::rectify::{rectify_pair, Rectification, Roi};
 use camera::RpcModel;
-use raster::formats::{read_tiff, write_homographies, write_npy};
+use raster::formats::{write_homographies, write_npy};
 use raster::Image;
 use serde_json::json;
 
 use crate::progress::{track, Progress};
+use crate::reconstruct::raw::RawImage;
 use crate::world_io::write_json;
 
 /// What to rectify and where.
@@ -71,33 +72,12 @@ pub struct RectifySummary {
 
 /// A raw image: its pixels (nodata → NaN) and the RPC of its TIFF tag when there is one.
 fn read_raw(path: &Path, which: &str) -> Result<(Image, Option<RpcModel>)> {
-    let is_tiff = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"));
-    if !is_tiff {
-        let image = raster::read_image(path)
-            .with_context(|| format!("reading the {which} image {}", path.display()))?;
-        return Ok((image, None));
-    }
-    let raster =
-        read_tiff(path).with_context(|| format!("reading the {which} image {}", path.display()))?;
-    let mut image = raster.image;
-    if let Some(nodata) = raster.nodata.filter(|v| !v.is_nan()) {
-        let nodata = nodata as f32;
-        for v in image.data_mut() {
-            if *v == nodata {
-                *v = f32::NAN;
-            }
-        }
-    }
-    let rpc = raster
-        .rpc
-        .as_ref()
-        .map(RpcModel::from_tiff_tag)
-        .transpose()
-        .with_context(|| format!("the RPC tag of {}", path.display()))?;
-    Ok((image, rpc))
+    let raw = RawImage::open(path, which)?;
+    let (w, h) = raw.size();
+    let image = raw
+        .window(0, 0, w, h)
+        .with_context(|| format!("reading the {which} image {}", path.display()))?;
+    Ok((image, raw.rpc))
 }
 
 /// The camera of one view: the JSON when given, else the TIFF tag.

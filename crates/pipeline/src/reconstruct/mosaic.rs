@@ -29,11 +29,6 @@ impl Mosaic {
         }
     }
 
-    /// Bytes held, for the memory plan.
-    pub fn bytes(grid: &DsmGrid) -> u64 {
-        (grid.width * grid.height) as u64 * 6
-    }
-
     /// Merges one tile's cells.
     pub fn add(&mut self, part: &GridWindow) {
         for r in 0..part.height {

@@ -90,6 +90,33 @@ pub struct TileRecord {
     pub cells: Option<(usize, usize, usize, usize)>,
 }
 
+impl TileRecord {
+    /// A tile that has not run yet: `Done` until something says otherwise.
+    fn new(tile: &Tile, memory_bytes: u64) -> Self {
+        TileRecord {
+            tile: tile.clone(),
+            status: TileStatus::Done,
+            error: None,
+            seconds: 0.0,
+            disparity_range: None,
+            rectified_size: None,
+            matched: None,
+            points: 0,
+            memory_bytes,
+            cells: None,
+        }
+    }
+
+    /// The record of a tile that could not even be rectified.
+    pub fn failed(tile: &Tile, e: &anyhow::Error) -> Self {
+        TileRecord {
+            status: TileStatus::Failed,
+            error: Some(format!("{e:#}")),
+            ..TileRecord::new(tile, 0)
+        }
+    }
+}
+
 /// The local rectification of a tile.
 pub fn tile_rectification(scene: &Scene, tile: &Tile) -> Result<Rectification> {
     rectification(
@@ -126,16 +153,9 @@ pub fn run_tile(
 ) -> (TileRecord, Option<GridWindow>) {
     let t = Instant::now();
     let mut record = TileRecord {
-        tile: tile.clone(),
-        status: TileStatus::Done,
-        error: None,
-        seconds: 0.0,
         disparity_range: Some(rect.disparity_range),
         rectified_size: Some(rect.size),
-        matched: None,
-        points: 0,
-        memory_bytes,
-        cells: None,
+        ..TileRecord::new(tile, memory_bytes)
     };
     let cells = match match_and_grid(scene, tile, rect, &mut record) {
         Ok(Some(cells)) => {
