@@ -383,16 +383,8 @@ pub fn fill_holes(dsm: &Image, max_distance: usize) -> (Image, usize) {
     let (w, h) = dsm.size();
     let src = dsm.channel(0);
     let data = src.data();
-    const DIRS: [(i64, i64); 8] = [
-        (1, 0),
-        (-1, 0),
-        (0, 1),
-        (0, -1),
-        (1, 1),
-        (-1, -1),
-        (1, -1),
-        (-1, 1),
-    ];
+    // Opposite rays side by side: a cell between data on both sides of one line.
+    const DIRS: [(i64, i64); 8] = raster::geometry::EIGHT_DIRECTIONS;
     let ray = |x: usize, y: usize, (dx, dy): (i64, i64)| -> Option<f32> {
         let (mut cx, mut cy) = (x as i64, y as i64);
         for _ in 0..max_distance {

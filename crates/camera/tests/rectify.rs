@@ -346,8 +346,8 @@ fn rectified_synthetic_pair_matches_to_the_true_disparity() {
     assert_eq!(pair.right.size(), pair.size);
     assert!(pair.left.data().iter().any(|v| v.is_nan()), "NaN outside");
     let (lo, hi) = pair.disparity_range;
-    let params = matching::SgmParams::with_range(lo, hi);
-    let disp = matching::match_pair(&pair.left, &pair.right, &params).unwrap();
+    let params = matching::SgmParams::default();
+    let disp = matching::match_pair(&pair.left, &pair.right, (lo, hi), &params).unwrap();
     // The true disparity of each rectified left pixel of the region.
     let inv = pair.h_left.inverse().unwrap();
     let mut errors = Vec::new();
@@ -458,7 +458,8 @@ fn s2p_pair_rectified_from_rpcs_matches_the_s2p_dsm() {
     let disparity = matching::match_pair(
         &pair.left,
         &pair.right,
-        &matching::SgmParams::with_range(lo, hi),
+        (lo, hi),
+        &matching::SgmParams::default(),
     )
     .unwrap();
     let t_match = t.elapsed();

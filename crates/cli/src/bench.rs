@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{anyhow, Result};
 use clap::{Args, ValueEnum};
 
-use crate::stages::DeviceArg;
+use crate::args::DeviceArg;
 
 /// What to time.
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -66,7 +66,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if a.runs == 0 {
         anyhow::bail!("--runs must be at least 1");
     }
-    let device = nn::infer::device_by_name(&a.device.name).map_err(|e| anyhow!(e))?;
+    let device = a.device.device.device().map_err(|e| anyhow!(e))?;
     let (preset, h, w, iters, batch) = match a.workload {
         BenchWorkload::Monsterpp => ("vits", 256, 512, 12, 1),
         BenchWorkload::Segformer => ("mit-b2", 1000, 1000, 0, 1),
@@ -116,7 +116,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if a.json {
         let v = serde_json::json!({
             "workload": name, "config": preset, "shape": shape, "iters": iters,
-            "max_disp": a.max_disp, "batch": batch, "device": a.device.name,
+            "max_disp": a.max_disp, "batch": batch, "device": a.device.device.name(),
             "threads": std::thread::available_parallelism().map_or(1, |n| n.get()), "runs": a.runs, "warmup_s": warmup,
             "median_s": median, "min_s": min, "times_s": times, "peak_rss_mib": peak,
         });
@@ -130,7 +130,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             } else {
                 String::new()
             },
-            a.device.name,
+            a.device.device,
             std::thread::available_parallelism().map_or(1, |n| n.get()),
             a.runs,
             peak.map_or("n/a".into(), |m| format!("{m:.0} MiB"))

@@ -1,169 +1,15 @@
-//! The dataset stages: `synthesize`, `dataset build`, `dataset world` (arguments and runs).
-//! Every stage is resumable (finished items are skipped) and shardable (`--shard i/n`).
+//! `seasonstereo dataset build` and `dataset world`: training sets (resumable, shardable).
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
-use clap::{Args, Subcommand, ValueEnum};
-use pipeline::dataset_build::dataset::{Shard, Subset};
+use clap::{Args, Subcommand};
+use dataset::Subset;
 use pipeline::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
-use pipeline::synthesize::synth::api::{GeminiConfig, GeminiGenerator};
-use pipeline::synthesize::synth::prompts::Prompts;
-use pipeline::synthesize::synth::{BuiltinSeasons, Season, SeasonGenerator};
-use pipeline::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
 use pipeline::world_training::{build_world_training, WorldTrainingOptions};
 use pipeline::Progress;
 
-use crate::SgmArgs;
-
-pub(crate) fn parse_shard(s: &str) -> Result<Shard, String> {
-    Shard::parse(s).map_err(|e| e.to_string())
-}
-
-fn parse_season(s: &str) -> Result<Season, String> {
-    s.parse::<Season>().map_err(|e| e.to_string())
-}
-
-/// Which seasonal generator makes the variants.
-#[derive(Clone, Copy, ValueEnum)]
-pub enum GeneratorKind {
-    /// The built-in geometry-preserving appearance model (offline, deterministic).
-    Builtin,
-    /// A generative image-editing API (Gemini `generateContent`); key from --api-key-env.
-    Gemini,
-}
-
-#[derive(Args)]
-#[command(
-    after_help = "Inputs: PAIRS/L/<pair>.iio, PAIRS/R/<pair>.iio, PAIRS/homography/<pair>.npz \
-    (the release's synchronic_only/ or `seasonstereo rectify` outputs) and the raw images \
-    RAW/**/<id>.{tif,png,npy,iio} of the pairs' image ids (the release's Track3-RGB-* folders work \
-    as they are). Per image: OUT/cropped/<id>.tif (+ .json, where the crop lies), \
-    OUT/cropped-synthetic/<id>_<season>.tif (variants that passed the geometry-fidelity check), \
-    OUT/rejected/<id>_<season>.tif and OUT/rejected.csv (those that failed: never used), \
-    OUT/variants/<id>.json (written last). Per pair: OUT/rectified/<pair>/{L,R}_<season>.npy, the \
-    variants rectified with the pair's homographies adapted to the crop.\n\n\
-    Resumable: finished images are skipped, a variant already on disk is checked again, not \
-    regenerated. Shardable over the sorted image ids.\n\n\
-    Examples:\n  seasonstereo synthesize --pairs data/synchronic_only --raw data/Train-Track3 \
-    --selected out/curate/selected.txt -o out/synthetic\n  GEMINI_API_KEY=… seasonstereo \
-    synthesize --generator gemini --prompts seasons.toml --pairs P --raw RAW -o out/synthetic"
-)]
-pub struct SynthesizeArgs {
-    /// Synchronic pairs folder (L/, R/, homography/).
-    #[arg(long)]
-    pairs: PathBuf,
-    /// Folder of the raw images (searched recursively by image id).
-    #[arg(long)]
-    raw: PathBuf,
-    /// Output folder.
-    #[arg(short, long, default_value = "out/synthetic")]
-    output: PathBuf,
-    /// Selected pairs: curate's selected.txt or selected.csv. Default: every pair.
-    #[arg(long, value_name = "FILE")]
-    selected: Option<PathBuf>,
-    /// Class maps <id>.png (OpenEarthMap ids, raw frame) handed to the generator as hints.
-    #[arg(long, value_name = "DIR")]
-    classes: Option<PathBuf>,
-    /// Centre crop side, pixels (smaller images are kept whole).
-    #[arg(long, default_value_t = DEFAULT_CROP)]
-    crop: usize,
-    /// Seasons to generate (repeat or comma-separate).
-    #[arg(long, value_delimiter = ',', value_parser = parse_season,
-          default_value = "summer,autumn,winter,spring")]
-    seasons: Vec<Season>,
-    /// Seasonal generator.
-    #[arg(long, value_enum, default_value_t = GeneratorKind::Builtin)]
-    generator: GeneratorKind,
-    /// Seed of the built-in generator.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// API model (gemini).
-    #[arg(long, default_value = pipeline::synthesize::synth::api::DEFAULT_MODEL)]
-    model: String,
-    /// Seasonal prompts, TOML (gemini; default: the built-in prompts).
-    #[arg(long, value_name = "FILE")]
-    prompts: Option<PathBuf>,
-    /// Environment variable holding the API key (gemini; the key is never logged).
-    #[arg(long, default_value = pipeline::synthesize::synth::api::DEFAULT_API_KEY_ENV)]
-    api_key_env: String,
-    /// API endpoint (gemini).
-    #[arg(long, default_value = pipeline::synthesize::synth::api::DEFAULT_BASE_URL)]
-    api_url: String,
-    /// Requests in flight at once (gemini).
-    #[arg(long, default_value_t = 4)]
-    max_concurrent: usize,
-    /// Response cache, so a rerun never pays twice (gemini). Default: OUT/api-cache.
-    #[arg(long, value_name = "DIR")]
-    cache: Option<PathBuf>,
-    /// Largest accepted global shift of a variant against its source, pixels.
-    #[arg(long, default_value_t = 0.5)]
-    max_shift: f64,
-    /// Smallest accepted edge score (NCC of the structure maps at zero shift).
-    #[arg(long, default_value_t = 0.6)]
-    min_edge_score: f64,
-    /// Process only shard I of N (0 ≤ I < N) of the sorted image ids (Slurm:
-    /// $SLURM_ARRAY_TASK_ID/N; Kubernetes indexed jobs: $JOB_COMPLETION_INDEX/N).
-    #[arg(long, value_name = "I/N", value_parser = parse_shard, default_value = "0/1")]
-    shard: Shard,
-}
-
-/// Runs `seasonstereo synthesize`.
-pub fn run_synthesize_command(a: SynthesizeArgs, progress: &dyn Progress) -> Result<()> {
-    let mut opts = SynthesizeOptions::new(&a.pairs, &a.raw, &a.output);
-    opts.selected = a.selected;
-    opts.classes_dir = a.classes;
-    opts.crop = a.crop;
-    opts.seasons = a.seasons;
-    opts.shard = a.shard;
-    opts.fidelity.max_shift_px = a.max_shift;
-    opts.fidelity.min_edge_score = a.min_edge_score;
-    let generator: Box<dyn SeasonGenerator> = match a.generator {
-        GeneratorKind::Builtin => Box::new(BuiltinSeasons::new(a.seed)),
-        GeneratorKind::Gemini => {
-            let prompts = match &a.prompts {
-                Some(p) => Prompts::load(p)?,
-                None => Prompts::default(),
-            };
-            let config = GeminiConfig {
-                base_url: a.api_url,
-                model: a.model,
-                api_key_env: a.api_key_env,
-                prompts,
-                max_concurrent: a.max_concurrent.max(1),
-                cache_dir: Some(a.cache.unwrap_or_else(|| a.output.join("api-cache"))),
-                ..GeminiConfig::default()
-            };
-            Box::new(GeminiGenerator::new(config)?)
-        }
-    };
-    eprintln!("generator: {}", generator.name());
-    let s = run_synthesize(&opts, generator.as_ref(), progress)?;
-    let i = &s.images;
-    println!(
-        "images: {} processed, {} already done (skipped), {} in this shard of {}; variants: {} accepted, {} rejected by the fidelity check (see {})",
-        i.done,
-        i.skipped,
-        i.in_shard,
-        i.total,
-        s.accepted,
-        s.rejected,
-        a.output.join("rejected.csv").display()
-    );
-    println!(
-        "pairs rectified: {}{}",
-        s.pairs_rectified,
-        if s.pairs_waiting > 0 {
-            format!(
-                ", {} waiting for images of other shards (`dataset build` rectifies them)",
-                s.pairs_waiting
-            )
-        } else {
-            String::new()
-        }
-    );
-    Ok(())
-}
+use crate::args::{SgmArgs, ShardArg};
 
 #[derive(Args)]
 pub struct DatasetArgs {
@@ -241,10 +87,8 @@ struct BuildArgs {
     /// Also write PNG previews (OUT/<split>/png/).
     #[arg(long)]
     preview: bool,
-    /// Process only shard I of N (0 ≤ I < N) of the sorted pairs (Slurm:
-    /// $SLURM_ARRAY_TASK_ID/N; Kubernetes indexed jobs: $JOB_COMPLETION_INDEX/N).
-    #[arg(long, value_name = "I/N", value_parser = parse_shard, default_value = "0/1")]
-    shard: Shard,
+    #[command(flatten)]
+    shard: ShardArg,
 }
 
 #[derive(Args)]
@@ -315,7 +159,7 @@ fn print_build(split: &str, s: &BuildSummary, out: &std::path::Path) {
 }
 
 /// Runs `seasonstereo dataset …`.
-pub fn run_dataset(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
+pub fn run(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
     match a.command {
         DatasetCommand::Build(b) => {
             let mut opts = BuildOptions::new(&b.pairs, &b.teacher, &b.output);
@@ -338,7 +182,7 @@ pub fn run_dataset(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
             opts.split = b.split.clone();
             opts.seed = b.seed;
             opts.previews = b.preview;
-            opts.shard = b.shard;
+            opts.shard = b.shard.shard;
             let s = run_build(&opts, progress)?;
             print_build(&b.split, &s, &b.output);
         }
@@ -348,7 +192,7 @@ pub fn run_dataset(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
             opts.generator_seed = w.generator_seed;
             opts.subset_seed = w.subset_seed;
             opts.previews = w.preview;
-            opts.sgm = w.sgm.params()?;
+            opts.sgm = w.sgm.params(matching::Aggregation::Mgm)?;
             let s = build_world_training(&opts, progress)?;
             println!(
                 "{} training and {} validation worlds of {}² px (disparity range {}..{} px); variants rejected: {} (train), {} (val)",

@@ -39,7 +39,7 @@ pub struct DemoArgs {
     #[arg(long, requires = "ablation")]
     heldout_worlds: Option<usize>,
     #[command(flatten)]
-    sgm: crate::SgmArgs,
+    sgm: crate::args::SgmArgs,
 }
 
 pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
@@ -50,7 +50,7 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
         size: a.size.unwrap_or(512),
         seed: a.seed,
         out_dir: a.output.unwrap_or_else(|| "out/demo".into()),
-        sgm: a.sgm.params()?,
+        sgm: a.sgm.params(matching::Aggregation::Mgm)?,
     };
     let s = run_demo(&opts, progress)?;
     let v = &s.visible;
@@ -84,7 +84,7 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
 fn run_ablation_command(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
     let mut opts = AblationOptions::new(a.output.unwrap_or_else(|| "out/demo-ablation".into()));
     opts.seed = a.seed;
-    opts.sgm = a.sgm.params()?;
+    opts.sgm = a.sgm.params(matching::Aggregation::Mgm)?;
     if let Some(n) = a.size {
         opts.size = n;
     }

@@ -37,8 +37,8 @@ pub struct DsmArgs {
     epsg: Option<u32>,
     /// Height of a cell from its points. Default max: the benchmark's protocol, so DSMs compare
     /// with its numbers; `median` is robust to isolated wrong points (the DSM to use).
-    #[arg(long, value_enum, default_value_t = crate::reconstruct::GriddingArg::Max)]
-    gridding: crate::reconstruct::GriddingArg,
+    #[arg(long, value_enum, default_value_t = crate::args::GriddingArg::Max)]
+    gridding: crate::args::GriddingArg,
     /// Fill holes enclosed by data within this many cells, ground first; 0 (default) leaves
     /// them empty, as the benchmark's protocol does.
     #[arg(long, value_name = "CELLS", default_value_t = 0)]
@@ -56,26 +56,8 @@ pub struct DsmArgs {
     compare: Option<PathBuf>,
 }
 
-/// `XMIN,YMIN,XMAX,YMAX` with MIN < MAX: UTM bounds here, lon/lat bounds for `reconstruct
-/// --roi-lonlat`; `names` spells the four values in the messages.
-pub(crate) fn parse_box(s: &str, names: &str) -> Result<[f64; 4], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| {
-            p.trim()
-                .parse::<f64>()
-                .map_err(|e| format!("{p:?} in {s:?}: {e}"))
-        })
-        .collect::<Result<_, _>>()?;
-    match v[..] {
-        [a, b, c, d] if a < c && b < d => Ok([a, b, c, d]),
-        [_, _, _, _] => Err(format!("{names} {s:?} must have each MIN < MAX")),
-        _ => Err(format!("expected {names}, got {s:?}")),
-    }
-}
-
 fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
-    parse_box(s, "XMIN,YMIN,XMAX,YMAX")
+    crate::args::parse_box(s, "XMIN,YMIN,XMAX,YMAX")
 }
 
 pub fn run(a: DsmArgs) -> Result<()> {

@@ -1,34 +1,14 @@
-//! `seasonstereo reconstruct` (raw pair → DSM) and `seasonstereo score` (any DSM vs a truth).
+//! `seasonstereo reconstruct`: from a raw pair to a DSM, tile by tile.
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
-use clap::{Args, ValueEnum};
+use anyhow::{bail, Result};
+use clap::Args;
 use pipeline::dsm::GridChoice;
-use pipeline::eval::metrics::DsmScores;
 use pipeline::reconstruct::tile::TileStatus;
-use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
+use pipeline::reconstruct::{reconstruct, ReconstructOptions};
 
-use crate::{Method, NetworkArgs, RectifyArgs, SgmArgs};
-
-/// How the points of one DSM cell become its height.
-#[derive(Clone, Copy, ValueEnum)]
-pub enum GriddingArg {
-    /// Highest point per cell: the benchmark's protocol; one wrong point above a roof decides
-    /// the cell.
-    Max,
-    /// Median of the points per cell: robust to isolated wrong points.
-    Median,
-}
-
-impl From<GriddingArg> for camera::Gridding {
-    fn from(g: GriddingArg) -> Self {
-        match g {
-            GriddingArg::Max => camera::Gridding::Max,
-            GriddingArg::Median => camera::Gridding::Median,
-        }
-    }
-}
+use crate::args::{parse_alt_range, parse_box, parse_roi, GriddingArg, MatcherArgs, ShardArg};
 
 #[derive(Args)]
 #[command(
@@ -58,7 +38,7 @@ pub struct ReconstructArgs {
     #[arg(long, value_name = "JSON")]
     rpc_right: Option<PathBuf>,
     /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
-    #[arg(long, value_name = "X,Y,W,H", value_parser = RectifyArgs::parse_roi, conflicts_with = "roi_lonlat")]
+    #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi, conflicts_with = "roi_lonlat")]
     roi: Option<camera::rectify::Roi>,
     /// Region of interest as lon/lat bounds (degrees): the left image's pixels that see it at
     /// any altitude of the scene.
@@ -76,11 +56,10 @@ pub struct ReconstructArgs {
     /// and only as many tiles as fit run at once (at most one per core).
     #[arg(long, value_name = "GIB", default_value_t = 2.0)]
     max_memory: f64,
-    /// Run only the tiles ≡ I mod N of the plan (Slurm: $SLURM_ARRAY_TASK_ID/N; Kubernetes:
-    /// $JOB_COMPLETION_INDEX/N), all shards sharing one --work folder; the shard that finds
-    /// every tile finished writes the DSM (or run --merge at the end).
-    #[arg(long, value_name = "I/N", value_parser = crate::dataset::parse_shard, default_value = "0/1")]
-    shard: pipeline::dataset_build::dataset::Shard,
+    /// The tiles of the plan, all shards sharing one --work folder; the shard that finds every
+    /// tile finished writes the DSM (or run --merge at the end).
+    #[command(flatten)]
+    shard: ShardArg,
     /// Only assemble the DSM from the tiles in --work (after sharded runs); fails naming the
     /// missing tiles.
     #[arg(long)]
@@ -92,7 +71,7 @@ pub struct ReconstructArgs {
     keep_intermediates: bool,
     /// Altitudes of the scene MIN:MAX, metres. Default: min_alt/max_alt of the JSON cameras, else
     /// the RPCs' altitude offset ± scale.
-    #[arg(long, value_name = "MIN:MAX", value_parser = RectifyArgs::parse_alt_range, allow_hyphen_values = true)]
+    #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
     alt_range: Option<(f64, f64)>,
     /// Folder of the intermediate files (default: OUTPUT without extension + "_work").
     #[arg(long, value_name = "DIR")]
@@ -124,29 +103,8 @@ pub struct ReconstructArgs {
     /// with the benchmark's metric; needs --like on the same file.
     #[arg(long, value_name = "DSM", requires = "like")]
     truth: Option<PathBuf>,
-    /// Classical matching method (when no --model is given).
-    #[arg(long, value_enum, default_value_t = Method::Mgm)]
-    method: Method,
     #[command(flatten)]
-    sgm: SgmArgs,
-    #[command(flatten)]
-    net: NetworkArgs,
-}
-
-/// One line with the benchmark's scores.
-pub fn format_scores(s: &DsmScores) -> String {
-    let m = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3} m"));
-    format!(
-        "MAE filtered {} (raw {}, no water {}), coverage {}, shift {},{} cells, offset {}",
-        m(s.mae_filtered),
-        m(s.mae_raw),
-        m(s.mae_no_water),
-        s.coverage
-            .map_or("-".into(), |c| format!("{:.1} %", 100.0 * c)),
-        s.dx,
-        s.dy,
-        s.offset.map_or("-".into(), |o| format!("{o:+.3} m"))
-    )
+    matcher: MatcherArgs,
 }
 
 pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> {
@@ -158,10 +116,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
             );
         }
     }
-    let matcher = match a.net.model {
-        Some(_) => Matcher::Network(a.net.monster_options()?),
-        None => Matcher::Classical(a.sgm.params_for(a.method)?),
-    };
+    let matcher = a.matcher.matcher()?;
     let grid = match &a.like {
         Some(p) => GridChoice::Like(p.clone()),
         None => GridChoice::Resolution {
@@ -190,7 +145,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         tile: a.tile,
         collar: a.collar,
         max_memory: gib_to_bytes(a.max_memory)?,
-        shard: a.shard,
+        shard: a.shard.shard,
         merge_only: a.merge,
         keep_intermediates: a.keep_intermediates,
     };
@@ -249,7 +204,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         times.join(", ")
     );
     if let Some(sc) = &s.scores {
-        println!("vs truth: {}", format_scores(sc));
+        println!("vs truth: {}", crate::score::format_scores(sc));
     }
     Ok(())
 }
@@ -264,72 +219,5 @@ fn gib_to_bytes(gib: f64) -> Result<u64> {
 
 /// `LON_MIN,LAT_MIN,LON_MAX,LAT_MAX`.
 fn parse_lonlat(s: &str) -> Result<[f64; 4], String> {
-    crate::dsm::parse_box(s, "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX")
-}
-
-#[derive(Args)]
-#[command(
-    after_help = "The benchmark's metric on any DSM already on the truth's grid (e.g. \
-    from `reconstruct --like`, `dsm --like`, or s2p): integer (dx, dy) shift within ±5 cells \
-    maximising NCC, vertical offset b = mean(truth) − mean(DSM), MAE over cells where both exist \
-    (filtered: without foliage 5 and water 9 of <AOI>_CLS.tif), coverage = share of truth cells \
-    with a value."
-)]
-pub struct ScoreArgs {
-    /// DSMs to score (GeoTIFF on the truth's grid).
-    #[arg(required = true)]
-    dsm: Vec<PathBuf>,
-    /// Ground truth <AOI>_DSM.tif (GeoTIFF, or DFC2019 plain TIFF + <AOI>_DSM.txt); its
-    /// <AOI>_CLS.tif (and optional <AOI>_WATER.png) beside it.
-    #[arg(long, value_name = "DSM")]
-    truth: PathBuf,
-    /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (Jacksonville), 15N (Omaha),
-    /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
-    #[arg(long, value_name = "ZONE", value_parser = parse_zone)]
-    utm_zone: Option<camera::UtmZone>,
-    /// Write the scores as JSON lines to this file too.
-    #[arg(long)]
-    json: Option<PathBuf>,
-}
-
-fn parse_zone(s: &str) -> Result<camera::UtmZone, String> {
-    let t = s.trim().to_ascii_uppercase();
-    let (num, hemi) = t.split_at(t.len().saturating_sub(1));
-    let north = match hemi {
-        "N" => true,
-        "S" => false,
-        _ => return Err(format!("expected a zone like 17N or 21S, got {s:?}")),
-    };
-    let zone: u8 = num
-        .parse()
-        .map_err(|e| format!("zone number in {s:?}: {e}"))?;
-    camera::UtmZone::new(zone, north).map_err(|e| e.to_string())
-}
-
-pub fn run_score(a: ScoreArgs) -> Result<()> {
-    let zone = match a.utm_zone {
-        Some(z) => z,
-        None => camera::DsmGrid::read(&a.dsm[0], None)
-            .with_context(|| {
-                format!(
-                    "{}: cannot take the UTM zone from this DSM; give --utm-zone",
-                    a.dsm[0].display()
-                )
-            })?
-            .zone(),
-    };
-    let truth = pipeline::score::read_truth(&a.truth, zone)?;
-    let mut lines = String::new();
-    for path in &a.dsm {
-        let s = pipeline::score::score_dsm_file(path, &truth)?;
-        println!("{}: {}", path.display(), format_scores(&s));
-        let mut v = serde_json::to_value(&s)?;
-        v["dsm"] = serde_json::Value::String(path.display().to_string());
-        lines.push_str(&v.to_string());
-        lines.push('\n');
-    }
-    if let Some(j) = &a.json {
-        raster::formats::write_atomically(j, |f| std::io::Write::write_all(f, lines.as_bytes()))?;
-    }
-    Ok(())
+    parse_box(s, "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX")
 }

@@ -39,7 +39,7 @@ pub struct TrainArgs {
     stop_after: Option<usize>,
     // Where training runs (a run may resume on another device: the checkpoint is device-free).
     #[command(flatten)]
-    device: crate::stages::DeviceArg,
+    device: crate::args::DeviceArg,
     /// Print the resolved configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
@@ -84,7 +84,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         resume: a.resume.clone(),
         stop: Some(train::trainer::interrupt_flag()?),
         stop_after: a.stop_after,
-        device: Some(nn::infer::device_by_name(&a.device.name).map_err(anyhow::Error::msg)?),
+        device: Some(a.device.device.device().map_err(anyhow::Error::msg)?),
     };
     let mut bar = TrainBar::default();
     let summary = train::train(&config, &options, &mut bar)

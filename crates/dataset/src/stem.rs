@@ -109,6 +109,7 @@ impl PairStem {
                 "malformed pair stem {stem:?}: no '-' between the left and right image ids"
             ))
         })?;
+
         Ok(PairStem {
             left: ImageRef::parse(l, stem)?,
             right: ImageRef::parse(r, stem)?,

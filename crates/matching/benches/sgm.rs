@@ -25,10 +25,12 @@ fn bench(c: &mut Criterion) {
             for (name, aggregation) in [("sgm", Aggregation::Sgm), ("mgm", Aggregation::Mgm)] {
                 let params = SgmParams {
                     aggregation,
-                    ..SgmParams::with_range(-8, n_disp - 9)
+                    ..SgmParams::default()
                 };
                 group.bench_function(format!("{name}/{size}x{size}x{n_disp}"), |b| {
-                    b.iter(|| match_pair(&pair.left, &pair.right, &params).unwrap())
+                    b.iter(|| {
+                        match_pair(&pair.left, &pair.right, (-8, n_disp - 9), &params).unwrap()
+                    })
                 });
             }
         }

@@ -17,9 +17,9 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(128);
     let pair = synthetic::standard_pair(size, size);
-    let params = SgmParams::with_range(-8, n_disp - 9);
+    let params = SgmParams::default();
     let t = Instant::now();
-    let disp = match_pair(&pair.left, &pair.right, &params).unwrap();
+    let disp = match_pair(&pair.left, &pair.right, (-8, n_disp - 9), &params).unwrap();
     let secs = t.elapsed().as_secs_f64();
     let s = synthetic::stats(disp.data(), &pair.disp, |i| !pair.occluded[i]);
     println!(

@@ -95,6 +95,29 @@ fn step<const ASSIGN: bool>(
     m
 }
 
+/// Defines `$name(avx2, args…)`: `$imp(args…)` compiled with AVX2 enabled when `avx2` (checked
+/// at run time by the caller), the portable build otherwise. The kernels are plain Rust that the
+/// compiler vectorises for the wider registers.
+macro_rules! avx2_dispatch {
+    (fn $name:ident => $imp:ident ($($arg:ident: $ty:ty),* $(,)?)) => {
+        fn $name(avx2: bool, $($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                #[target_feature(enable = "avx2")]
+                unsafe fn fast($($arg: $ty),*) {
+                    $imp($($arg),*)
+                }
+                // SAFETY: AVX2 support was checked at run time.
+                unsafe { fast($($arg),*) };
+                return;
+            }
+            let _ = avx2;
+            $imp($($arg),*)
+        }
+    };
+}
+pub(crate) use avx2_dispatch;
+
 /// Whether the AVX2 variants can run on this CPU (SGM's and MGM's).
 #[inline]
 pub(crate) fn has_avx2() -> bool {
@@ -160,36 +183,15 @@ pub(crate) fn aggregate(
     sweep.run(cost, sum, dims, pen, npath, false, avx2, tick);
 }
 
-fn horizontal_row(
-    avx2: bool,
-    crow: &[u8],
-    srow: &mut [u16],
-    y: usize,
-    dims: Dims,
-    pen: &Penalties,
-    buf: &mut [u16],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: AVX2 support was checked at run time.
-        unsafe { horizontal_row_avx2(crow, srow, y, dims, pen, buf) };
-        return;
-    }
-    let _ = avx2;
-    horizontal_row_impl(crow, srow, y, dims, pen, buf);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn horizontal_row_avx2(
-    crow: &[u8],
-    srow: &mut [u16],
-    y: usize,
-    dims: Dims,
-    pen: &Penalties,
-    buf: &mut [u16],
-) {
-    horizontal_row_impl(crow, srow, y, dims, pen, buf)
+avx2_dispatch! {
+    fn horizontal_row => horizontal_row_impl(
+        crow: &[u8],
+        srow: &mut [u16],
+        y: usize,
+        dims: Dims,
+        pen: &Penalties,
+        buf: &mut [u16],
+    )
 }
 
 /// Left→right then right→left along row `y`. `buf` holds `3 · (n + 2)` values, all
@@ -206,55 +208,68 @@ fn horizontal_row_impl(
     let (w, n) = (dims.width, dims.n_disp);
     let np = n + 2;
     let (start, rest) = buf.split_at_mut(np);
-    let (mut a, mut b) = rest.split_at_mut(np);
+    let (a, b) = rest.split_at_mut(np);
     let start: &[u16] = start;
     let base = y * w;
-    // Left to right: assign.
-    let mut pm = step::<true>(
-        &crow[..n],
+    // Left to right assigns, right to left adds.
+    let row = RowSweep {
+        crow,
+        n,
+        base,
+        pen,
         start,
-        u16::MAX,
-        pen.p1,
-        pen.p2,
-        a,
-        &mut srow[..n],
-    );
-    for x in 1..w {
-        let p2 = pen.p2_between(base + x, base + x - 1);
-        pm = step::<true>(
-            &crow[x * n..(x + 1) * n],
-            a,
-            pm,
+    };
+    row.sweep::<true>(srow, a, b, 0..w, |x| x - 1);
+    row.sweep::<false>(srow, a, b, (0..w).rev(), |x| x + 1);
+}
+
+/// One row of the cost volume swept in one sense.
+struct RowSweep<'a> {
+    crow: &'a [u8],
+    n: usize,
+    /// Index of the row's first pixel in the image (for the adaptive `P2`).
+    base: usize,
+    pen: &'a Penalties<'a>,
+    /// The `u16::MAX` state before the first pixel.
+    start: &'a [u16],
+}
+
+impl RowSweep<'_> {
+    /// Visits the pixels `xs` in order, each after `prev(x)`; `ASSIGN` writes the path costs into
+    /// `srow`, otherwise adds them. `a` and `b` are the line buffers.
+    #[inline(always)]
+    fn sweep<'b, const ASSIGN: bool>(
+        &self,
+        srow: &mut [u16],
+        mut a: &'b mut [u16],
+        mut b: &'b mut [u16],
+        mut xs: impl Iterator<Item = usize>,
+        prev: impl Fn(usize) -> usize,
+    ) {
+        let (n, pen) = (self.n, self.pen);
+        let Some(x0) = xs.next() else { return };
+        let mut pm = step::<ASSIGN>(
+            &self.crow[x0 * n..(x0 + 1) * n],
+            self.start,
+            u16::MAX,
             pen.p1,
-            p2,
-            b,
-            &mut srow[x * n..(x + 1) * n],
-        );
-        std::mem::swap(&mut a, &mut b);
-    }
-    // Right to left: add.
-    let x = w - 1;
-    let mut pm = step::<false>(
-        &crow[x * n..(x + 1) * n],
-        start,
-        u16::MAX,
-        pen.p1,
-        pen.p2,
-        a,
-        &mut srow[x * n..(x + 1) * n],
-    );
-    for x in (0..w - 1).rev() {
-        let p2 = pen.p2_between(base + x, base + x + 1);
-        pm = step::<false>(
-            &crow[x * n..(x + 1) * n],
+            pen.p2,
             a,
-            pm,
-            pen.p1,
-            p2,
-            b,
-            &mut srow[x * n..(x + 1) * n],
+            &mut srow[x0 * n..(x0 + 1) * n],
         );
-        std::mem::swap(&mut a, &mut b);
+        for x in xs {
+            let p2 = pen.p2_between(self.base + x, self.base + prev(x));
+            pm = step::<ASSIGN>(
+                &self.crow[x * n..(x + 1) * n],
+                a,
+                pm,
+                pen.p1,
+                p2,
+                b,
+                &mut srow[x * n..(x + 1) * n],
+            );
+            std::mem::swap(&mut a, &mut b);
+        }
     }
 }
 
@@ -335,34 +350,14 @@ impl Sweep {
     }
 }
 
-fn sweep_chunk(
-    avx2: bool,
-    ctx: &RowCtx,
-    x0: usize,
-    s: &mut [u16],
-    state: &mut [u16],
-    mins: &mut [u16],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: AVX2 support was checked at run time.
-        unsafe { sweep_chunk_avx2(ctx, x0, s, state, mins) };
-        return;
-    }
-    let _ = avx2;
-    sweep_chunk_impl(ctx, x0, s, state, mins);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sweep_chunk_avx2(
-    ctx: &RowCtx,
-    x0: usize,
-    s: &mut [u16],
-    state: &mut [u16],
-    mins: &mut [u16],
-) {
-    sweep_chunk_impl(ctx, x0, s, state, mins)
+avx2_dispatch! {
+    fn sweep_chunk => sweep_chunk_impl(
+        ctx: &RowCtx,
+        x0: usize,
+        s: &mut [u16],
+        state: &mut [u16],
+        mins: &mut [u16],
+    )
 }
 
 /// Pixels `x0 .. x0 + s.len() / n` of one sweep row: path 0 comes from `(x, pred_y)`, path 1

@@ -44,7 +44,6 @@ pub mod census;
 mod cost;
 mod error;
 mod mgm;
-pub mod occlusion;
 mod range;
 mod select;
 mod sgm;
@@ -54,7 +53,7 @@ pub use census::CensusWindow;
 pub use error::MatchError;
 pub use range::estimate_range;
 pub use sgm::{
-    match_pair, match_pair_auto, match_pair_with_progress, memory_bytes, Aggregation, Paths,
-    SgmParams,
+    disparity_count, match_pair, match_pair_with_progress, memory_bytes, Aggregation,
+    DisparityRange, Paths, SgmParams,
 };
 pub use speckle::{remove_speckles, Speckle};

@@ -23,7 +23,7 @@
 //!
 //! Memory is that of SGM: the `u8` cost and `u16` sum volumes plus line buffers.
 
-use crate::aggregate::{has_avx2, Dims, Penalties};
+use crate::aggregate::{avx2_dispatch, has_avx2, Dims, Penalties};
 use rayon::prelude::*;
 
 /// The two predecessors' terms averaged (or the one that exists), plus the cost: the kernel of
@@ -194,21 +194,14 @@ pub(crate) fn aggregate_mgm(
     }
 }
 
-fn run_scan(avx2: bool, cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan: Scan) {
-    #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: AVX2 support was checked at run time.
-        unsafe { run_scan_avx2(cost, sum, dims, pen, scan) };
-        return;
-    }
-    let _ = avx2;
-    run_scan_impl(cost, sum, dims, pen, scan);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn run_scan_avx2(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan: Scan) {
-    run_scan_impl(cost, sum, dims, pen, scan)
+avx2_dispatch! {
+    fn run_scan => run_scan_impl(
+        cost: &[u8],
+        sum: &mut [u16],
+        dims: Dims,
+        pen: &Penalties,
+        scan: Scan,
+    )
 }
 
 /// A raw view of the sum volume shared by the parallel chunks of one line: each pixel is written
@@ -342,16 +335,7 @@ mod tests {
             height: h,
             n_disp: n,
         } = dims;
-        let dirs: [(i64, i64); 8] = [
-            (1, 0),
-            (-1, 0),
-            (0, 1),
-            (0, -1),
-            (1, 1),
-            (-1, -1),
-            (-1, 1),
-            (1, -1),
-        ];
+        let dirs = raster::geometry::EIGHT_DIRECTIONS;
         let mut total = vec![0i64; w * h * n];
         for (rx, ry) in dirs {
             // r⊥ = (−ry, rx): +90° in image coordinates.

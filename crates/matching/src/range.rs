@@ -33,9 +33,9 @@ pub fn estimate_range(left: &Image, right: &Image) -> Result<(i32, i32), MatchEr
     let r = (cw / 4).clamp(8, 64) as i32;
     let params = SgmParams {
         uniqueness: Some(0.1),
-        ..SgmParams::with_range(-r, r)
+        ..SgmParams::default()
     };
-    let disp = match_grey(&lg, &rg, cw, ch, &params, None)?;
+    let disp = match_grey(&lg, &rg, (cw, ch), (-r, r), &params, None)?;
     let mut valid: Vec<f32> = disp.into_iter().filter(|v| v.is_finite()).collect();
     if valid.len() < (cw * ch / 100).max(16) {
         return Err(MatchError::RangeEstimation(format!(

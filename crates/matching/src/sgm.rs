@@ -43,13 +43,20 @@ pub enum Aggregation {
     Mgm,
 }
 
-/// Parameters of [`match_pair`].
+/// The disparities tested, `(d_min, d_max)` **inclusive** (`d_max − d_min + 1` of them; `d_min`
+/// may be negative). It belongs to the pair (its cameras and altitudes), not to the matcher, so it
+/// is an argument of [`match_pair`] beside the parameters.
+pub type DisparityRange = (i32, i32);
+
+/// Number of disparities of `range`, `None` when it is empty.
+pub fn disparity_count((d_min, d_max): DisparityRange) -> Option<usize> {
+    let n = i64::from(d_max) - i64::from(d_min) + 1;
+    (n > 0).then_some(n as usize)
+}
+
+/// Parameters of [`match_pair`] (the range is not one of them: see [`DisparityRange`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SgmParams {
-    /// Smallest disparity tested (may be negative).
-    pub d_min: i32,
-    /// Largest disparity tested, **inclusive**: `d_max − d_min + 1` disparities.
-    pub d_max: i32,
     /// Penalty of a ±1 disparity change between neighbours, in census bits.
     pub p1: u16,
     /// Penalty of a larger jump, in census bits (`P1 < P2 ≤ 4000`).
@@ -91,12 +98,9 @@ impl Default for SgmParams {
     /// MGM, 5×5 census, `P1 = 16`, `P2 = 300` adapted to the gradient (`k = 0.02`: a jump costs
     /// `P2 / 3` across an edge of 4 % of the image's range, `P1 + 1` across strong edges),
     /// left–right tolerance 1 px, uniqueness 0.02, equiangular sub-pixel fit, median, speckle
-    /// regions under 200 px removed (1 px tolerance). The default range `[0, 63]` is a
-    /// placeholder: set yours with [`SgmParams::with_range`] or [`crate::estimate_range`].
+    /// regions under 200 px removed (1 px tolerance).
     fn default() -> Self {
         Self {
-            d_min: 0,
-            d_max: 63,
             p1: 16,
             p2: 300,
             p2_adaptive: Some(0.02),
@@ -117,31 +121,68 @@ impl Default for SgmParams {
 }
 
 impl SgmParams {
-    /// Default parameters with the inclusive range `[d_min, d_max]`.
-    pub fn with_range(d_min: i32, d_max: i32) -> Self {
-        Self {
-            d_min,
-            d_max,
-            ..Self::default()
-        }
+    /// The parameters in words, for reports and records.
+    pub fn describe(&self) -> String {
+        let p = self;
+        let aggregation = match p.aggregation {
+            Aggregation::Mgm => "MGM (8 directions, two predecessors each)".to_string(),
+            Aggregation::Sgm => format!(
+                "SGM ({} paths)",
+                match p.paths {
+                    Paths::Four => 4,
+                    Paths::Eight => 8,
+                }
+            ),
+        };
+        let p2 = match p.p2_adaptive {
+            Some(k) => format!("P2 {} adapted to the image gradient (k = {k})", p.p2),
+            None => format!("P2 {} (constant)", p.p2),
+        };
+        let lr = match p.lr_tolerance {
+            Some(t) => format!("left–right check within {t} px"),
+            None => "no left–right check".into(),
+        };
+        let uniqueness = match p.uniqueness {
+            Some(u) => format!("uniqueness ratio {u}"),
+            None => "no uniqueness test".into(),
+        };
+        let speckle = match &p.speckle {
+            Some(s) => format!(
+                "regions under {} px removed (tolerance {} px)",
+                s.min_area, s.max_diff
+            ),
+            None => "no speckle filter".into(),
+        };
+        let on_off = |b: bool| if b { "on" } else { "off" };
+        format!(
+            "census {}×{} + {aggregation}; P1 {}, {p2}; {lr}; {uniqueness}; equiangular sub-pixel fit {}; \
+             3×3 median {}; {speckle}.",
+            p.census.width,
+            p.census.height,
+            p.p1,
+            on_off(p.subpixel),
+            on_off(p.median),
+        )
     }
 
-    /// Number of disparities tested, `None` when the range is empty.
-    pub fn n_disp(&self) -> Option<usize> {
-        let n = i64::from(self.d_max) - i64::from(self.d_min) + 1;
-        (n > 0).then_some(n as usize)
-    }
-
-    fn validate(&self) -> Result<usize, MatchError> {
-        let n = self.n_disp().ok_or(MatchError::EmptyRange {
-            d_min: self.d_min,
-            d_max: self.d_max,
+    /// Checks the parameters and `range`; returns the number of disparities.
+    fn validate(&self, range: DisparityRange) -> Result<usize, MatchError> {
+        let n = disparity_count(range).ok_or(MatchError::EmptyRange {
+            d_min: range.0,
+            d_max: range.1,
         })?;
         if n > usize::from(u16::MAX) {
             return Err(MatchError::InvalidParams(format!(
                 "at most 65535 disparities, got {n}"
             )));
         }
+        self.check()?;
+        Ok(n)
+    }
+
+    /// Checks the parameters (what [`match_pair`] would refuse, the range aside), so a bad
+    /// setting fails before any pair is read.
+    pub fn check(&self) -> Result<(), MatchError> {
         if !self.census.is_valid() {
             return Err(MatchError::InvalidParams(format!(
                 "census window {}x{} must have odd sides and at most 64 bits",
@@ -178,7 +219,7 @@ impl SgmParams {
                 )));
             }
         }
-        Ok(n)
+        Ok(())
     }
 }
 
@@ -200,8 +241,13 @@ pub fn memory_bytes(width: usize, height: usize, n_disp: usize) -> usize {
 /// Images of any channel count are converted to grey ([`Image::to_gray`]); they must have the same
 /// size. NaN input pixels are invalid: the output is NaN there (and where the match lands on a NaN
 /// right pixel).
-pub fn match_pair(left: &Image, right: &Image, params: &SgmParams) -> Result<Image, MatchError> {
-    match_pair_with_progress(left, right, params, None)
+pub fn match_pair(
+    left: &Image,
+    right: &Image,
+    range: DisparityRange,
+    params: &SgmParams,
+) -> Result<Image, MatchError> {
+    match_pair_with_progress(left, right, range, params, None)
 }
 
 /// [`match_pair`] with a progress callback, called as `(done, total)` from any thread (about
@@ -209,13 +255,14 @@ pub fn match_pair(left: &Image, right: &Image, params: &SgmParams) -> Result<Ima
 pub fn match_pair_with_progress(
     left: &Image,
     right: &Image,
+    range: DisparityRange,
     params: &SgmParams,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Image, MatchError> {
     let (w, h) = check_pair(left, right)?;
     let lg = left.to_gray();
     let rg = right.to_gray();
-    let disp = match_grey(lg.data(), rg.data(), w, h, params, progress)?;
+    let disp = match_grey(lg.data(), rg.data(), (w, h), range, params, progress)?;
     Ok(Image::new(w, h, 1, disp).expect("sizes match"))
 }
 
@@ -234,32 +281,16 @@ pub(crate) fn check_pair(left: &Image, right: &Image) -> Result<(usize, usize), 
     Ok((w, h))
 }
 
-/// Estimates the range with [`crate::estimate_range`], then matches with it. Returns the map and
-/// the range used.
-pub fn match_pair_auto(
-    left: &Image,
-    right: &Image,
-    params: &SgmParams,
-) -> Result<(Image, (i32, i32)), MatchError> {
-    let (d_min, d_max) = crate::estimate_range(left, right)?;
-    let p = SgmParams {
-        d_min,
-        d_max,
-        ..params.clone()
-    };
-    Ok((match_pair(left, right, &p)?, (d_min, d_max)))
-}
-
 /// The whole pipeline on grey, row-major buffers of `w × h`.
 pub(crate) fn match_grey(
     lg: &[f32],
     rg: &[f32],
-    w: usize,
-    h: usize,
+    (w, h): (usize, usize),
+    range: DisparityRange,
     params: &SgmParams,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Vec<f32>, MatchError> {
-    let n = params.validate()?;
+    let n = params.validate(range)?;
     let needed = memory_bytes(w, h, n);
     if let Some(limit) = params.max_memory {
         if needed > limit {
@@ -287,7 +318,7 @@ pub(crate) fn match_grey(
     build_cost_volume(
         &lc,
         &rc,
-        params.d_min,
+        range.0,
         n,
         (params.census.bits() / 2) as u8,
         &mut cost,
@@ -328,7 +359,7 @@ pub(crate) fn match_grey(
     drop(cost);
 
     let sel = Selection {
-        d_min: params.d_min,
+        d_min: range.0,
         lr_tolerance: params.lr_tolerance,
         uniqueness: params.uniqueness,
         subpixel: if params.subpixel {

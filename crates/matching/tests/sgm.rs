@@ -5,8 +5,8 @@
 mod synthetic;
 
 use matching::{
-    estimate_range, match_pair, match_pair_auto, match_pair_with_progress, memory_bytes,
-    MatchError, Paths, SgmParams,
+    estimate_range, match_pair, match_pair_with_progress, memory_bytes, MatchError, Paths,
+    SgmParams,
 };
 use raster::Image;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -18,8 +18,7 @@ const H: usize = 256;
 #[test]
 fn accuracy_on_slanted_plane_and_blocks() {
     let pair = standard_pair(W, H);
-    let params = SgmParams::with_range(0, 31);
-    let disp = match_pair(&pair.left, &pair.right, &params).unwrap();
+    let disp = match_pair(&pair.left, &pair.right, (0, 31), &SgmParams::default()).unwrap();
     assert_eq!(disp.size(), (W, H));
     assert_eq!(disp.channels(), 1);
     let d = disp.data();
@@ -48,9 +47,9 @@ fn sub_pixel_refinement_helps_on_the_slanted_plane() {
     let run = |subpixel| {
         let p = SgmParams {
             subpixel,
-            ..SgmParams::with_range(0, 31)
+            ..SgmParams::default()
         };
-        let d = match_pair(&pair.left, &pair.right, &p).unwrap();
+        let d = match_pair(&pair.left, &pair.right, (0, 31), &p).unwrap();
         stats(d.data(), &pair.disp, |i| !pair.occluded[i]).mae
     };
     let (with, without) = (run(true), run(false));
@@ -67,9 +66,9 @@ fn four_paths_and_no_checks_still_match() {
         uniqueness: None,
         median: false,
         p2_adaptive: None,
-        ..SgmParams::with_range(0, 31)
+        ..SgmParams::default()
     };
-    let d = match_pair(&pair.left, &pair.right, &params).unwrap();
+    let d = match_pair(&pair.left, &pair.right, (0, 31), &params).unwrap();
     let vis = stats(d.data(), &pair.disp, |i| !pair.occluded[i]);
     eprintln!("four paths: {vis:?}");
     assert!(
@@ -82,7 +81,7 @@ fn four_paths_and_no_checks_still_match() {
 fn negative_range_by_swapping_roles() {
     let pair = standard_pair(W, H);
     // The right image as reference: its disparities are −d, within [−31, 0].
-    let disp = match_pair(&pair.right, &pair.left, &SgmParams::with_range(-31, 0)).unwrap();
+    let disp = match_pair(&pair.right, &pair.left, (-31, 0), &SgmParams::default()).unwrap();
     let d = disp.data();
     // Right pixels whose source is visible: every right pixel shows the nearest surface, so all
     // are visible in the left image except where x_L = x_R − d_R falls out of frame.
@@ -102,7 +101,7 @@ fn range_with_negative_and_positive_disparities() {
     let pair = standard_pair(W, H);
     let shift = 10usize;
     let right = Image::from_fn(W, H, |x, y| pair.right.get((x + W - shift) % W, y, 0));
-    let disp = match_pair(&pair.left, &right, &SgmParams::with_range(-16, 15)).unwrap();
+    let disp = match_pair(&pair.left, &right, (-16, 15), &SgmParams::default()).unwrap();
     let truth: Vec<f32> = pair.disp.iter().map(|d| d - shift as f32).collect();
     // Skip the wrapped band and the occlusions.
     let s = stats(disp.data(), &truth, |i| !pair.occluded[i] && i % W >= 40);
@@ -117,8 +116,7 @@ fn range_estimation_brackets_the_true_range() {
     eprintln!("estimated range [{lo}, {hi}] for true [3, 20]");
     assert!(lo <= 3 && hi >= 20, "[{lo}, {hi}]");
     assert!(lo >= -16 && hi <= 40, "too wide: [{lo}, {hi}]");
-    let (disp, range) = match_pair_auto(&pair.left, &pair.right, &SgmParams::default()).unwrap();
-    assert_eq!(range, (lo, hi));
+    let disp = match_pair(&pair.left, &pair.right, (lo, hi), &SgmParams::default()).unwrap();
     let s = stats(disp.data(), &pair.disp, |i| !pair.occluded[i]);
     assert!(s.mae < 0.3 && s.coverage > 0.85, "{s:?}");
 }
@@ -126,17 +124,17 @@ fn range_estimation_brackets_the_true_range() {
 #[test]
 fn invariant_to_value_range_and_channels() {
     let pair = standard_pair(128, 128);
-    let params = SgmParams::with_range(0, 31);
-    let a = match_pair(&pair.left, &pair.right, &params).unwrap();
+    let params = SgmParams::default();
+    let a = match_pair(&pair.left, &pair.right, (0, 31), &params).unwrap();
     // [0, 1] floats.
     let unit = |img: &Image| Image::from_fn(128, 128, |x, y| (img.get(x, y, 0) - 1000.0) / 3000.0);
-    let b = match_pair(&unit(&pair.left), &unit(&pair.right), &params).unwrap();
+    let b = match_pair(&unit(&pair.left), &unit(&pair.right), (0, 31), &params).unwrap();
     // Three identical channels.
     let rgb = |img: &Image| {
         let data = img.data().iter().flat_map(|&v| [v, v, v]).collect();
         Image::new(128, 128, 3, data).unwrap()
     };
-    let c = match_pair(&rgb(&pair.left), &rgb(&pair.right), &params).unwrap();
+    let c = match_pair(&rgb(&pair.left), &rgb(&pair.right), (0, 31), &params).unwrap();
     let same = |x: &Image, y: &Image| {
         x.data()
             .iter()
@@ -154,7 +152,7 @@ fn mismatched_sizes_are_an_error() {
     let a = Image::filled(32, 16, 1, 1.0);
     let b = Image::filled(31, 16, 1, 1.0);
     assert!(matches!(
-        match_pair(&a, &b, &SgmParams::default()),
+        match_pair(&a, &b, (0, 63), &SgmParams::default()),
         Err(MatchError::SizeMismatch { .. })
     ));
     assert!(matches!(
@@ -166,7 +164,7 @@ fn mismatched_sizes_are_an_error() {
 #[test]
 fn empty_range_and_bad_parameters_are_errors() {
     let pair = standard_pair(32, 32);
-    let err = match_pair(&pair.left, &pair.right, &SgmParams::with_range(5, 4)).unwrap_err();
+    let err = match_pair(&pair.left, &pair.right, (5, 4), &SgmParams::default()).unwrap_err();
     assert!(
         matches!(err, MatchError::EmptyRange { d_min: 5, d_max: 4 }),
         "{err}"
@@ -177,16 +175,16 @@ fn empty_range_and_bad_parameters_are_errors() {
         ..SgmParams::default()
     };
     assert!(matches!(
-        match_pair(&pair.left, &pair.right, &bad),
+        match_pair(&pair.left, &pair.right, (0, 31), &bad),
         Err(MatchError::InvalidParams(_))
     ));
     let empty = Image::filled(0, 0, 1, 0.0);
     assert!(matches!(
-        match_pair(&empty, &empty, &SgmParams::default()),
+        match_pair(&empty, &empty, (0, 63), &SgmParams::default()),
         Err(MatchError::EmptyImage(0, 0))
     ));
     // A single disparity is a valid range.
-    let one = match_pair(&pair.left, &pair.right, &SgmParams::with_range(7, 7)).unwrap();
+    let one = match_pair(&pair.left, &pair.right, (7, 7), &SgmParams::default()).unwrap();
     assert!(one.data().iter().all(|v| v.is_nan() || *v == 7.0));
 }
 
@@ -198,17 +196,17 @@ fn memory_accounting_and_limit() {
     let pair = standard_pair(64, 64);
     let params = SgmParams {
         max_memory: Some(memory_bytes(64, 64, 32) - 1),
-        ..SgmParams::with_range(0, 31)
+        ..SgmParams::default()
     };
     assert!(matches!(
-        match_pair(&pair.left, &pair.right, &params),
+        match_pair(&pair.left, &pair.right, (0, 31), &params),
         Err(MatchError::TooLarge { .. })
     ));
     let params = SgmParams {
         max_memory: Some(memory_bytes(64, 64, 32)),
         ..params
     };
-    assert!(match_pair(&pair.left, &pair.right, &params).is_ok());
+    assert!(match_pair(&pair.left, &pair.right, (0, 31), &params).is_ok());
 }
 
 #[test]
@@ -227,7 +225,7 @@ fn nan_input_pixels_give_nan_output() {
             right.set(x, y, 0, f32::NAN);
         }
     }
-    let disp = match_pair(&left, &right, &SgmParams::with_range(0, 31)).unwrap();
+    let disp = match_pair(&left, &right, (0, 31), &SgmParams::default()).unwrap();
     let d = disp.data();
     for y in 100..140 {
         for x in 150..190 {
@@ -257,7 +255,7 @@ fn constant_image_does_not_panic() {
     let flat = Image::filled(64, 48, 1, 7.0);
     // Every disparity has the same census cost: the values are arbitrary (SGM propagates the
     // border's out-of-image costs), but they are NaN or inside the range.
-    let disp = match_pair(&flat, &flat, &SgmParams::with_range(-4, 11)).unwrap();
+    let disp = match_pair(&flat, &flat, (-4, 11), &SgmParams::default()).unwrap();
     assert!(disp
         .data()
         .iter()
@@ -282,7 +280,8 @@ fn progress_reaches_its_total() {
     match_pair_with_progress(
         &pair.left,
         &pair.right,
-        &SgmParams::with_range(0, 31),
+        (0, 31),
+        &SgmParams::default(),
         Some(&cb),
     )
     .unwrap();

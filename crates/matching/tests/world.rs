@@ -9,7 +9,8 @@ fn scores(seed: u64) -> (f64, f64, f64) {
     let d = match_pair(
         &w.left.image,
         &w.right.image,
-        &SgmParams::with_range(lo, hi),
+        (lo, hi),
+        &SgmParams::default(),
     )
     .unwrap();
     let (mut n, mut matched, mut abs, mut bad2) = (0usize, 0usize, 0.0f64, 0usize);

@@ -150,42 +150,6 @@ pub fn preset_name(config: &MonsterConfig) -> &'static str {
     }
 }
 
-/// The device named `cpu` (burn's flex backend), `wgpu` or `cuda` (when built with those
-/// features), or the best compiled one for `auto` (cuda, then wgpu, then cpu).
-pub fn device_by_name(name: &str) -> Result<Device, String> {
-    match name {
-        "cpu" | "flex" => Ok(Device::flex()),
-        #[cfg(feature = "wgpu")]
-        "wgpu" => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
-        #[cfg(feature = "cuda")]
-        "cuda" => Ok(Device::cuda(0)),
-        "auto" => Ok(default_device()),
-        #[cfg(not(feature = "wgpu"))]
-        "wgpu" => Err(not_compiled_in("wgpu")),
-        #[cfg(not(feature = "cuda"))]
-        "cuda" => Err(not_compiled_in("cuda")),
-        other => Err(format!(
-            "unknown device {other:?} (expected auto, cpu, wgpu or cuda)"
-        )),
-    }
-}
-
-/// Why a GPU backend named on the command line cannot be used, and how to get it.
-#[allow(dead_code)] // unused when both GPU features are compiled in
-fn not_compiled_in(backend: &str) -> String {
-    format!("the {backend} backend is not compiled in: rebuild with `--features {backend}`")
-}
-
-/// The best compiled device: CUDA, then wgpu, then the CPU.
-#[allow(unreachable_code)]
-pub fn default_device() -> Device {
-    #[cfg(feature = "cuda")]
-    return Device::cuda(0);
-    #[cfg(feature = "wgpu")]
-    return Device::wgpu(burn::tensor::DeviceKind::DefaultDevice);
-    Device::flex()
-}
-
 /// Peak memory estimate (bytes) of one forward pass of `config` on a `height × width` input
 /// (already padded to multiples of 32), plus `weights_bytes` of parameters.
 ///

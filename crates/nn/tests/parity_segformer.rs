@@ -9,13 +9,12 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use burn::tensor::Device;
-use nn::segformer::postprocess::{
-    argmax_classes, percentages_header, postprocess, softmax_classes, upsample_scores,
+use dataset::segmentation::{
+    argmax_classes, percentages_header, softmax_classes, upsample_scores, MaskKind, Segmentation,
 };
+use nn::segformer::postprocess::postprocess;
 use nn::segformer::preprocess::{pixel_values, to_rgb_u8};
-use nn::segformer::{
-    MaskKind, Segformer, SegformerConfig, Segmentation, Segmenter, SegmenterConfig, Trace,
-};
+use nn::segformer::{Segformer, SegformerConfig, Segmenter, SegmenterConfig, Trace};
 use nn::weights::WeightsError;
 use raster::morphology::{dilate_square, fill_holes, label_components, remove_small_components};
 use raster::resize::resize_pil_bilinear_u8;

@@ -41,11 +41,11 @@ use dataset::shard::Shard;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use crate::pairs::{PairFolder, PairPaths};
 use crate::progress::Progress;
 use crate::report::Report;
-use crate::teacher::batch::{run_items, BatchSummary};
-use crate::teacher::{self, list_pairs, SynchronicPair};
-use crate::world_io::write_json;
+use crate::stage::{run_items, write_json, write_text, BatchSummary};
+use crate::teacher::{self, TeacherRecord};
 use features::FeatureSimilarity;
 use select::{colour_normaliser, colour_score, joint_rank, rank_desc, Keep};
 
@@ -148,15 +148,10 @@ fn score_path(out_dir: &Path, stem: &str) -> PathBuf {
     out_dir.join("scores").join(format!("{stem}.json"))
 }
 
-/// Reads the teacher's record (`teacher.json`), or `null` when the folder has none (disparities
-/// from elsewhere).
+/// The teacher's record (`teacher.json`) as scores store it, `null` when the folder has none
+/// (disparities from elsewhere).
 fn teacher_record(teacher_dir: &Path) -> Result<serde_json::Value> {
-    let p = teacher_dir.join(teacher::RECORD_FILE);
-    if !p.is_file() {
-        return Ok(serde_json::Value::Null);
-    }
-    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{} is not valid JSON", p.display()))
+    Ok(serde_json::to_value(TeacherRecord::read(teacher_dir)?)?)
 }
 
 fn read_score(path: &Path) -> Result<Option<PairScore>> {
@@ -170,7 +165,7 @@ fn read_score(path: &Path) -> Result<Option<PairScore>> {
 
 /// Scores one pair (no caching).
 pub fn score_pair(
-    pair: &SynchronicPair,
+    pair: &PairPaths,
     disparity_path: &Path,
     features: &dyn FeatureSimilarity,
     teacher: &serde_json::Value,
@@ -219,7 +214,7 @@ pub fn score_pair(
 /// Runs `curate`: scores the shard's pairs that have no valid cached score, then ranks when every
 /// pair is scored.
 pub fn run_curate(opts: &CurateOptions, progress: &dyn Progress) -> Result<CurateSummary> {
-    let pairs = list_pairs(&opts.pairs_dir)?;
+    let pairs = PairFolder::new(&opts.pairs_dir).list()?;
     if pairs.is_empty() {
         bail!("no pairs in {}/L", opts.pairs_dir.display());
     }
@@ -235,10 +230,7 @@ pub fn run_curate(opts: &CurateOptions, progress: &dyn Progress) -> Result<Curat
         |p| {
             let d = teacher::disparity_path(&opts.teacher_dir, &p.stem);
             let s = score_pair(p, &d, opts.features.as_ref(), &teacher)?;
-            write_json(
-                &score_path(&opts.out_dir, &p.stem),
-                &serde_json::to_value(&s)?,
-            )
+            write_json(&score_path(&opts.out_dir, &p.stem), &s)
         },
         |p| p.stem.clone(),
     )?;
@@ -333,7 +325,7 @@ fn fmt(v: Option<f64>) -> String {
 
 fn rank_and_write(
     opts: &CurateOptions,
-    pairs: &[SynchronicPair],
+    pairs: &[PairPaths],
     scores: &[PairScore],
 ) -> Result<Ranking> {
     let (rows, d_max, k) = rank(scores, opts.colour, opts.ssim_scale, opts.keep);
@@ -403,7 +395,7 @@ fn rank_and_write(
             .map(|s| format!("{s}\n"))
             .collect::<String>(),
     )?;
-    let by_stem: std::collections::HashMap<&str, &SynchronicPair> =
+    let by_stem: std::collections::HashMap<&str, &PairPaths> =
         pairs.iter().map(|p| (p.stem.as_str(), p)).collect();
     let mut csv = String::from("id,left,right,s_feat,s_comb,rank_feat,rank_comb\n");
     for r in &sel {
@@ -467,11 +459,6 @@ fn csv_quote(s: &str) -> String {
     } else {
         s.to_string()
     }
-}
-
-fn write_text(path: &Path, text: &str) -> Result<()> {
-    raster::formats::write_atomically(path, |f| std::io::Write::write_all(f, text.as_bytes()))
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 fn write_report(

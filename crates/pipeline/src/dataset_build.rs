@@ -36,15 +36,11 @@ use raster::geometry::warp_homography;
 use raster::{Homography, Image, Mask};
 use serde::{Deserialize, Serialize};
 
+use crate::pairs::PairFolder;
 use crate::progress::Progress;
-use crate::synthesize::{
-    accepted_tags, pair_homographies, rectified_variant, selected_pairs, zero_invalid, CropRecord,
-    SyntheticLayout,
-};
-use crate::teacher::pairs::find_image;
-
-/// The training-set crate, for callers that only depend on `pipeline` (the CLI).
-pub use ::dataset;
+use crate::stage::write_text;
+use crate::synthesize::{accepted_tags, selected_pairs, zero_invalid, CropRecord, SyntheticLayout};
+use crate::teacher::TeacherRecord;
 
 /// Name of the experiment list of a validation split.
 pub const VAL_LIST: &str = "sub_val";
@@ -200,17 +196,8 @@ fn teacher_name(opts: &BuildOptions) -> Result<String> {
     if let Some(n) = &opts.teacher_name {
         return Ok(n.clone());
     }
-    let rec = opts.teacher_dir.join(crate::teacher::RECORD_FILE);
-    if rec.is_file() {
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rec)?)
-            .with_context(|| format!("{} is malformed", rec.display()))?;
-        if let Some(t) = v.get("teacher").and_then(|t| t.as_str()) {
-            return Ok(if t == "monsterpp" {
-                "monster++".into()
-            } else {
-                t.to_string()
-            });
-        }
+    if let Some(record) = TeacherRecord::read(&opts.teacher_dir)? {
+        return Ok(record.dataset_folder_name());
     }
     Ok(opts
         .teacher_dir
@@ -302,11 +289,47 @@ pub fn run_build(opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildSu
     Ok(summary)
 }
 
+/// The variant `tag` of the `side` image of `pair` (from `synthesize`'s `cropped-synthetic/`),
+/// rectified into the pair's frame (`size`) with the pair's homography `h` adapted to the crop.
+/// Outside the crop's footprint the image is 0. This stage alone rectifies variants.
+fn rectified_variant(
+    layout: &SyntheticLayout,
+    pair: &PairStem,
+    side: Side,
+    tag: &str,
+    h: &Homography,
+    size: (usize, usize),
+) -> Result<Image> {
+    let id = side_id(pair, side);
+    let crop = layout.read_crop(id)?.with_context(|| {
+        format!(
+            "{} is missing: run `seasonstereo synthesize` for image {id}",
+            layout.crop_record(id).display()
+        )
+    })?;
+    let src = layout.variant(id, tag);
+    let variant = raster::read_image(&src)?;
+    if variant.size() != (crop.width, crop.height) {
+        bail!(
+            "{} is {}x{} but its crop is {}x{}",
+            src.display(),
+            variant.width(),
+            variant.height(),
+            crop.width,
+            crop.height
+        );
+    }
+    let (mut image, _) = warp_homography(&variant.to_rgb(), &crop.adapt(h), size.0, size.1)?;
+    zero_invalid(&mut image);
+    Ok(image)
+}
+
 /// The source image of one view: the real rectified image or a variant's tag.
-fn real_image(pairs_dir: &Path, pair: &PairStem, side: Side) -> Result<Image> {
+fn real_image(pairs: &PairFolder, pair: &PairStem, side: Side) -> Result<Image> {
     let name = pair.base_name();
-    let p = find_image(&pairs_dir.join(side.dir()), &name)?
-        .with_context(|| format!("no {}/{name}.iio in {}", side.dir(), pairs_dir.display()))?;
+    let p = pairs
+        .image(side, &name)?
+        .with_context(|| format!("no {}/{name}.iio in {}", side.dir(), pairs.root().display()))?;
     let mut im = raster::read_image(&p)?.to_rgb();
     zero_invalid(&mut im);
     Ok(im)
@@ -322,11 +345,9 @@ fn build_pair(
     budget: &mut Option<usize>,
 ) -> Result<bool> {
     let name = pair.base_name();
-    // Real images, and the frame every rectified file must have.
-    let real_path = |side: Side| find_image(&opts.pairs_dir.join(side.dir()), &name);
-    let left_path = real_path(Side::Left)?
-        .with_context(|| format!("no L/{name}.iio in {}", opts.pairs_dir.display()))?;
-    let size = raster::read_image(&left_path)?.size();
+    // The frame every rectified file must have.
+    let pairs = PairFolder::new(&opts.pairs_dir);
+    let size = pairs.size(&name)?;
 
     let tags = match synthetic {
         Some(s) => accepted_tags(s, pair)?,
@@ -342,7 +363,7 @@ fn build_pair(
         }
     };
     let crop = [crops(Side::Left)?, crops(Side::Right)?];
-    let homographies = match pair_homographies(&opts.pairs_dir, pair) {
+    let homographies = match pairs.homographies(&name) {
         Ok(h) => Some(h),
         Err(e) => {
             let needed = !left_tags.is_empty()
@@ -414,7 +435,7 @@ fn build_pair(
             return Ok(im.clone());
         }
         let im = match tag {
-            None => real_image(&opts.pairs_dir, pair, side)?,
+            None => real_image(&pairs, pair, side)?,
             Some(t) => {
                 let s = synthetic.expect("tags come from the synthetic folder");
                 let (hl, hr) = homographies.expect("checked above");
@@ -486,7 +507,7 @@ fn build_pair(
         width: size.0,
         height: size.1,
     };
-    crate::world_io::write_json(
+    crate::stage::write_json(
         &record_path(&layout.root, pair),
         &serde_json::to_value(&record)?,
     )?;
@@ -595,7 +616,8 @@ fn write_side_masks(
         (Some((w, h)), Some(hc)) => rectify_mask(&Mask::filled(w, h, true), &hc, size)?,
         _ => {
             // No raw frame known: the finite pixels of the rectified real image.
-            let p = find_image(&opts.pairs_dir.join(side.dir()), &pair.base_name())?
+            let p = PairFolder::new(&opts.pairs_dir)
+                .image(side, &pair.base_name())?
                 .context("real image vanished")?;
             let im = raster::read_image(&p)?;
             let c = im.channels();
@@ -764,12 +786,4 @@ fn relative(root: &Path, p: &Path) -> String {
         .unwrap_or(p)
         .to_string_lossy()
         .into_owned()
-}
-
-fn write_text(path: &Path, text: &str) -> Result<()> {
-    raster::formats::write_atomically(path, |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes())
-    })?;
-    Ok(())
 }

@@ -4,6 +4,7 @@
 //! through the RPC cameras into DSMs, score them against the truth DSM with the benchmark's
 //! protocol, and write an HTML report. Offline, CPU only, deterministic.
 
+#[cfg(feature = "network")]
 pub mod ablation;
 mod figures;
 
@@ -23,11 +24,12 @@ use crate::eval::layout::{AoiRule, TruthFiles};
 use crate::eval::metrics::{score_dsm, DsmScores};
 use crate::eval::protocol::Protocol;
 use crate::eval::{predicted_dsm, Truth};
+use crate::matcher::{Matcher, RangeSource};
 use crate::metrics::{error_map, score_disparity, DisparityScores};
-use crate::predict::predict_sgm;
+use crate::pairs::PairPaths;
 use crate::progress::{track, Progress};
 use crate::report::Report;
-use crate::world_io::{mask_picture, save_world, PairPaths};
+use crate::world_io::{mask_picture, save_world};
 
 pub use figures::{dsm_picture, hillshade, thumbnail};
 
@@ -171,21 +173,24 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
     // The search range comes from the cameras and the scene's altitude range, as it should for
     // satellite pairs, not from image matches.
     let range = world.disparity_range();
-    let (synchronic, _) = predict_sgm(
-        &world.left.image,
-        &world.right.image,
-        Some(range),
-        &opts.sgm,
-        progress,
-    )?;
+    let matcher = Matcher::Classical(opts.sgm.clone());
+    let synchronic = matcher
+        .disparity(
+            &world.left.image,
+            &world.right.image,
+            RangeSource::Given(range),
+            progress,
+        )?
+        .disparity;
     lap("match the synchronic pair", &mut seconds);
-    let (cross, _) = predict_sgm(
-        &left_winter,
-        &right_summer,
-        Some(range),
-        &opts.sgm,
-        progress,
-    )?;
+    let cross = matcher
+        .disparity(
+            &left_winter,
+            &right_summer,
+            RangeSource::Given(range),
+            progress,
+        )?
+        .disparity;
     lap("match the winter ↔ summer pair", &mut seconds);
 
     // Disparity scores and pictures.
@@ -436,49 +441,6 @@ pub fn pixels(v: Option<f64>) -> String {
 /// Formats an optional altitude error in metres.
 pub fn metres(v: Option<f64>) -> String {
     v.map_or("–".into(), |v| format!("{v:.3} m"))
-}
-
-/// The matcher's parameters in words.
-pub fn describe_matcher(p: &SgmParams) -> String {
-    let aggregation = match p.aggregation {
-        Aggregation::Mgm => "MGM (8 directions, two predecessors each)".to_string(),
-        Aggregation::Sgm => format!(
-            "SGM ({} paths)",
-            match p.paths {
-                Paths::Four => 4,
-                Paths::Eight => 8,
-            }
-        ),
-    };
-    let p2 = match p.p2_adaptive {
-        Some(k) => format!("P2 {} adapted to the image gradient (k = {k})", p.p2),
-        None => format!("P2 {} (constant)", p.p2),
-    };
-    let lr = match p.lr_tolerance {
-        Some(t) => format!("left–right check within {t} px"),
-        None => "no left–right check".into(),
-    };
-    let uniqueness = match p.uniqueness {
-        Some(u) => format!("uniqueness ratio {u}"),
-        None => "no uniqueness test".into(),
-    };
-    let speckle = match &p.speckle {
-        Some(s) => format!(
-            "regions under {} px removed (tolerance {} px)",
-            s.min_area, s.max_diff
-        ),
-        None => "no speckle filter".into(),
-    };
-    let on_off = |b: bool| if b { "on" } else { "off" };
-    format!(
-        "census {}×{} + {aggregation}; P1 {}, {p2}; {lr}; {uniqueness}; equiangular sub-pixel fit {}; \
-         3×3 median {}; {speckle}.",
-        p.census.width,
-        p.census.height,
-        p.p1,
-        on_off(p.subpixel),
-        on_off(p.median),
-    )
 }
 
 /// Command-line flags of `predict`/`eval` giving the matcher `p` (empty for the defaults).
@@ -745,7 +707,7 @@ fn write_report(
     );
 
     r.heading("Matcher");
-    r.paragraph(&describe_matcher(&opts.sgm));
+    r.paragraph(&opts.sgm.describe());
 
     r.heading("Timings");
     let mut rows: Vec<Vec<String>> = seconds
@@ -760,7 +722,8 @@ fn write_report(
     let out = opts.out_dir.display().to_string();
     let world = format!("{out}/world");
     let stem = &c.pair.stem;
-    let (left_id, right_id) = crate::eval::layout::split_stem(stem)?;
+    let ids = dataset::PairStem::parse(stem)?;
+    let (left_id, right_id) = (ids.left.id.as_str(), ids.right.id.as_str());
     let flags = matcher_flags(&opts.sgm);
     let truth = c.truth_dsm.display().to_string();
     let (lo, hi) = c.range;

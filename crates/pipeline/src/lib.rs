@@ -3,6 +3,11 @@
 //! release's folder layout, the end-to-end demo and its HTML report.
 //!
 //! Every stage reports progress through [`Progress`] so the CLI can draw bars while tests stay quiet.
+//!
+//! Shared by the stages: [`stage`] (the item loop with resume and `--shard`, atomic records,
+//! folder claims), [`pairs`] (the rectified-pair folder), [`matcher`] (which matcher, and where a
+//! pair's disparity range comes from). The learned networks sit behind the default feature
+//! `network`; without it everything else builds and tests without burn.
 
 pub mod curate;
 pub mod dataset_build;
@@ -10,13 +15,16 @@ pub mod demo;
 pub mod dsm;
 pub mod eval;
 pub mod masks;
+pub mod matcher;
 pub mod metrics;
+pub mod pairs;
 pub mod predict;
 pub mod progress;
 pub mod reconstruct;
 pub mod rectify;
 pub mod report;
 pub mod score;
+pub mod stage;
 pub mod synthesize;
 pub mod teacher;
 pub mod world_io;

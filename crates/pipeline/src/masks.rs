@@ -20,7 +20,7 @@
 //! the offline [`rules`] for real imagery (colour + height above ground from the pairs'
 //! disparities, [`heights`]; scored against real labels by [`score`]), or the offline
 //! [`offline::PixelClassifier`] trained on the procedural world; all go through the same
-//! post-processing (`nn::segformer::postprocess`: small-component removal, hole filling,
+//! post-processing (`dataset::segmentation`: small-component removal, hole filling,
 //! building dilation, areas in percent of the image). Masks stay in the frame of the image they
 //! were computed on: `dataset build` rectifies raw-image masks with each pair's homographies.
 //! Resumable (finished images skipped) and shardable over the sorted image list.
@@ -35,16 +35,17 @@ pub mod score;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use dataset::segmentation::{
+    argmax_classes, class_mask, percentages_header, MaskKind, MaskOptions, Segmentation,
+};
 use dataset::shard::Shard;
-use nn::segformer::postprocess::{argmax_classes, class_mask, percentages_header};
-use nn::segformer::{MaskKind, MaskOptions, Segmentation};
 use raster::formats::{write_png, PngDepth};
 use raster::Image;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::progress::Progress;
-use crate::teacher::batch::{run_items, BatchSummary};
-use crate::world_io::write_json;
+use crate::stage::{claim_folder, read_json, run_items, write_json, BatchSummary};
 
 /// File suffixes read as images (case-insensitive).
 pub const IMAGE_SUFFIXES: [&str; 5] = ["png", "tif", "tiff", "iio", "npy"];
@@ -69,25 +70,39 @@ pub trait ImageSegmenter {
     }
 }
 
+/// `masks.json` (and the first field of every image's record): which segmenter made the masks.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MasksRecord {
+    pub segmenter: String,
+}
+
+impl MasksRecord {
+    /// The record of a masks folder, `None` when it has none.
+    pub fn read(masks_dir: &Path) -> Result<Option<Self>> {
+        read_json(&masks_dir.join(RECORD_FILE))
+    }
+}
+
 /// SegFormer with the release's weights.
+#[cfg(feature = "network")]
 pub struct SegformerSegmenter {
     pub segmenter: nn::segformer::Segmenter,
     /// The weights file, for the record.
     pub weights: PathBuf,
 }
 
+#[cfg(feature = "network")]
 impl SegformerSegmenter {
     /// Loads the release's checkpoint (`openearthmap_segformer_mit-b2.pt`, or safetensors in HF
-    /// naming) strictly; `preset` `mit-b2` (the release) or `tiny` (the parity fixture);
-    /// `device` `auto`, `cpu`, `wgpu` or `cuda`.
-    pub fn load(weights: &Path, preset: &str, device: &str) -> Result<Self> {
+    /// naming) strictly; `preset` `mit-b2` (the release) or `tiny` (the parity fixture).
+    pub fn load(weights: &Path, preset: &str, device: nn::device::DeviceChoice) -> Result<Self> {
         use nn::segformer::{SegformerConfig, Segmenter, SegmenterConfig};
         let config = match preset {
             "mit-b2" | "mit_b2" => SegmenterConfig::release(),
             "tiny" => SegmenterConfig::with_model(SegformerConfig::tiny()),
             other => bail!("unknown SegFormer preset {other:?} (expected mit-b2 or tiny)"),
         };
-        let device = nn::infer::device_by_name(device).map_err(anyhow::Error::msg)?;
+        let device = device.device().map_err(anyhow::Error::msg)?;
         let segmenter = Segmenter::from_file(weights, config, &device)
             .with_context(|| format!("loading SegFormer from {}", weights.display()))?;
         Ok(SegformerSegmenter {
@@ -97,6 +112,7 @@ impl SegformerSegmenter {
     }
 }
 
+#[cfg(feature = "network")]
 impl ImageSegmenter for SegformerSegmenter {
     fn name(&self) -> String {
         format!("segformer ({})", self.weights.display())
@@ -413,9 +429,7 @@ pub fn write_percentages(out_dir: &Path) -> Result<usize> {
 }
 
 fn record_segmenter(path: &Path) -> Option<String> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v["segmenter"].as_str().map(str::to_string)
+    read_json::<MasksRecord>(path).ok()?.map(|r| r.segmenter)
 }
 
 /// Runs `masks` over the shard's unfinished images, then rebuilds the percentage files.
@@ -429,15 +443,20 @@ pub fn run_masks(opts: &MasksOptions, progress: &dyn Progress) -> Result<BatchSu
         );
     }
     let name = opts.segmenter.name();
-    let folder = opts.out_dir.join(RECORD_FILE);
-    match record_segmenter(&folder) {
-        Some(old) if old != name => bail!(
-            "{} holds masks of another segmenter ({old}); write these ({name}) to another folder",
-            opts.out_dir.display()
-        ),
-        Some(_) => {}
-        None => write_json(&folder, &json!({"segmenter": name}))?,
-    }
+    claim_folder(
+        &opts.out_dir.join(RECORD_FILE),
+        &MasksRecord {
+            segmenter: name.clone(),
+        },
+        |old, new| old == new,
+        |old| {
+            format!(
+                "{} holds masks of another segmenter ({}); write these ({name}) to another folder",
+                opts.out_dir.display(),
+                old.segmenter
+            )
+        },
+    )?;
     let summary = run_items(
         &images,
         &opts.shard,

@@ -1,14 +1,10 @@
-//! Disparity prediction for one rectified pair, and writing it in the format the user asked for.
+//! Reading a rectified pair to match, and writing its disparity in the format the user asked
+//! for (the matching itself is [`crate::matcher::Matcher`]'s).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use matching::SgmParams;
-use nn::config::MonsterConfig;
-use nn::infer::{MonsterPredictor, Normalisation};
 use raster::{colormap, Image};
-
-use crate::progress::{track, Progress};
 
 /// Reads a rectified pair; both images must have the same size.
 pub fn read_pair(left: &Path, right: &Path) -> Result<(Image, Image)> {
@@ -28,129 +24,6 @@ pub fn read_pair(left: &Path, right: &Path) -> Result<(Image, Image)> {
         );
     }
     Ok((l, r))
-}
-
-/// Matches a pair with census + SGM over `range` (estimated from the images when `None`; prefer a
-/// range from the cameras when you have them). Returns the disparity and the range used.
-pub fn predict_sgm(
-    left: &Image,
-    right: &Image,
-    range: Option<(i32, i32)>,
-    params: &SgmParams,
-    progress: &dyn Progress,
-) -> Result<(Image, (i32, i32))> {
-    let (d_min, d_max) = match range {
-        Some(r) => r,
-        None => matching::estimate_range(left, right)
-            .context("estimating the disparity range (give one with --range)")?,
-    };
-    let params = SgmParams {
-        d_min,
-        d_max,
-        ..params.clone()
-    };
-    let total = 5 * left.height();
-    let disparity = track(progress, "matching (census + SGM)", total, |cb| {
-        matching::match_pair_with_progress(left, right, &params, Some(cb))
-    })?;
-    Ok((disparity, (d_min, d_max)))
-}
-
-/// How to run MonSter++ (`seasonstereo predict --model monsterpp`).
-#[derive(Clone, Debug)]
-pub struct MonsterOptions {
-    /// Weights: an upstream `.pth` state dict or safetensors (upstream key names).
-    pub weights: PathBuf,
-    /// Preset: `vitl` (the released checkpoints), `vitb`, `vits` or `tiny` (the parity fixture).
-    pub preset: String,
-    /// Refinement iterations (≥ 7); `None`: the preset's (32, 8 for tiny).
-    pub iters: Option<usize>,
-    /// Maximum disparity, a multiple of 32; `None`: the preset's (416, 64 for tiny).
-    pub max_disp: Option<usize>,
-    /// Mapping of the samples to 0–255.
-    pub normalisation: Normalisation,
-    /// Peak memory of one forward pass, bytes; larger pairs are cut into strips of rows.
-    pub memory_budget: u64,
-    /// Strip height in rows (forces tiling).
-    pub tile_rows: Option<usize>,
-    /// Overlap of consecutive strips, rows.
-    pub tile_overlap: usize,
-    /// `auto`, `cpu`, `wgpu` or `cuda`.
-    pub device: String,
-}
-
-impl MonsterOptions {
-    /// Defaults for `weights` and `preset`.
-    pub fn new(weights: impl Into<PathBuf>, preset: &str) -> Self {
-        Self {
-            weights: weights.into(),
-            preset: preset.to_string(),
-            iters: None,
-            max_disp: None,
-            normalisation: Normalisation::AsIs,
-            memory_budget: nn::infer::DEFAULT_MEMORY_BUDGET,
-            tile_rows: None,
-            tile_overlap: nn::infer::DEFAULT_TILE_OVERLAP,
-            device: "auto".to_string(),
-        }
-    }
-
-    /// The network configuration these options describe.
-    pub fn config(&self) -> Result<MonsterConfig> {
-        let mut config = MonsterConfig::preset(&self.preset)?;
-        if let Some(i) = self.iters {
-            config.iters = i;
-        }
-        if let Some(d) = self.max_disp {
-            config.max_disp = d;
-        }
-        config.validate()?;
-        Ok(config)
-    }
-
-    /// Builds the network and loads the weights.
-    pub fn load(&self) -> Result<MonsterPredictor> {
-        let config = self.config()?;
-        let device = nn::infer::device_by_name(&self.device).map_err(anyhow::Error::msg)?;
-        let mut p = MonsterPredictor::load(config, &self.weights, device)?;
-        p.normalisation = self.normalisation;
-        p.memory_budget = self.memory_budget;
-        p.tile_rows = self.tile_rows;
-        p.tile_overlap = self.tile_overlap;
-        Ok(p)
-    }
-}
-
-/// Disparity of a rectified pair with MonSter++ (`predictor` from [`MonsterOptions::load`]):
-/// NaN where the left image has no data. Large pairs are cut into strips of rows, one progress
-/// step each.
-pub fn predict_monster(
-    predictor: &MonsterPredictor,
-    left: &Image,
-    right: &Image,
-    progress: &dyn Progress,
-) -> Result<Image> {
-    let strips = predictor.plan(left.width(), left.height())?;
-    let c = predictor.config();
-    let label = format!(
-        "MonSter++ ({}, {} iterations, max disparity {}{})",
-        nn::infer::preset_name(c),
-        predictor.iters,
-        c.max_disp,
-        if strips.len() > 1 {
-            format!(
-                ", {} strips of {} rows",
-                strips.len(),
-                strips[0].1 - strips[0].0
-            )
-        } else {
-            String::new()
-        }
-    );
-    let d = track(progress, &label, strips.len(), |cb| {
-        predictor.predict_with_progress(left, right, &|done, total| cb(done, total))
-    })?;
-    Ok(d)
 }
 
 /// Writes a disparity map; the extension picks the format: `.iio`/`.npy` (NPY float32),

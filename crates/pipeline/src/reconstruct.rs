@@ -25,29 +25,19 @@ use anyhow::{bail, Context, Result};
 use camera::rectify::{Rectification, Roi};
 use camera::{write_dsm, DsmGrid, Gridding, RpcModel, UtmZone};
 use dataset::shard::Shard;
-use matching::SgmParams;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::dsm::{finish_dsm, DsmSummary, GridChoice};
 use crate::eval::metrics::DsmScores;
-use crate::predict::MonsterOptions;
+use crate::matcher::Matcher;
 use crate::progress::Progress;
 use crate::rectify::{altitude_range, camera_of, file_stem};
-use crate::world_io::write_json;
+use crate::stage::write_json;
 use mosaic::{read_part, write_part, Mosaic};
 use plan::{plan_tiles, Tile};
 use raw::RawImage;
-use tile::{run_tile, tile_memory, tile_rectification, Scene, TileMatcher, TileRecord, TileStatus};
-
-/// The matcher of a reconstruction.
-#[derive(Clone, Debug)]
-pub enum Matcher {
-    /// Census + MGM/SGM over the range from the cameras.
-    Classical(SgmParams),
-    /// MonSter++ with weights (no range needed).
-    Network(MonsterOptions),
-}
+use tile::{run_tile, tile_memory, tile_rectification, Scene, TileRecord, TileStatus};
 
 /// What to reconstruct and how.
 #[derive(Clone, Debug)]
@@ -264,10 +254,7 @@ pub fn reconstruct(
             grid.epsg,
         ),
         gridding: format!("{:?}", opts.gridding).to_lowercase(),
-        matcher: match &opts.matcher {
-            Matcher::Classical(p) => crate::demo::describe_matcher(p),
-            Matcher::Network(o) => format!("MonSter++ {} ({})", o.preset, o.weights.display()),
-        },
+        matcher: opts.matcher.describe(),
         border: opts.border,
     };
     // The tiles stay inside the budget by construction; the assembly holds the whole grid.
@@ -307,17 +294,12 @@ pub fn reconstruct(
             .collect();
         // Held by the process besides the tiles (images' headers, records, thread stacks).
         let base = 256 << 20;
-        let matcher = match &opts.matcher {
-            Matcher::Classical(p) => TileMatcher::Classical(p.clone()),
-            Matcher::Network(o) => {
-                // The network cuts a tile into strips of rows to stay within the budget.
-                let mut o = o.clone();
-                o.memory_budget = o
-                    .memory_budget
-                    .min(opts.max_memory.saturating_sub(2 * base));
-                TileMatcher::Network(Box::new(Mutex::new(o.load()?)))
-            }
-        };
+        let matcher = &opts.matcher;
+        // The network cuts a tile into strips of rows to stay within the budget.
+        #[cfg(feature = "network")]
+        if let Matcher::Network(n) = matcher {
+            n.limit_memory(opts.max_memory.saturating_sub(2 * base));
+        }
         let scene = Scene {
             left: &left,
             right: &right,
@@ -326,7 +308,7 @@ pub fn reconstruct(
             rpc_files: [opts.rpc_left.as_deref(), opts.rpc_right.as_deref()],
             alt_range,
             alt_source,
-            matcher: &matcher,
+            matcher,
             grid: &grid,
             gridding: opts.gridding,
             border: opts.border,
@@ -363,10 +345,11 @@ pub fn reconstruct(
             );
         }
         let threads = rayon::current_num_threads().max(1);
-        in_flight = match matcher {
-            TileMatcher::Network(_) => 1,
-            TileMatcher::Classical(_) => (((opts.max_memory - base) / largest.max(1)) as usize)
-                .clamp(1, threads.min(todo.len().max(1))),
+        in_flight = if matcher.one_at_a_time() {
+            1
+        } else {
+            (((opts.max_memory - base) / largest.max(1)) as usize)
+                .clamp(1, threads.min(todo.len().max(1)))
         };
         progress.begin(&format!("tiles ({in_flight} at once)"), todo.len());
         let next = AtomicUsize::new(0);

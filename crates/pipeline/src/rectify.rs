@@ -19,11 +19,12 @@ use camera::rectify::{rectify_pair, Rectification, Roi};
 use camera::RpcModel;
 use raster::formats::{write_homographies, write_npy};
 use raster::Image;
-use serde_json::json;
+use serde::{Deserialize, Serialize};
 
+use crate::pairs::{PairFolder, PairPaths};
 use crate::progress::{track, Progress};
 use crate::reconstruct::raw::RawImage;
-use crate::world_io::write_json;
+use crate::stage::write_json;
 
 /// What to rectify and where.
 #[derive(Clone, Debug)]
@@ -154,8 +155,52 @@ pub(crate) fn right_coverage(right: &Image, rect: &Rectification) -> f64 {
     covered as f64 / (rw * rh).max(1) as f64
 }
 
-/// What `rectify/<stem>.json` says of a rectified pair (read by `masks --pairs` and `eval`).
-pub(crate) struct RectifyRecord<'a> {
+/// The record of one rectified pair, `rectify/<stem>.json`: written by `rectify` and by
+/// `reconstruct --keep-intermediates`, read through [`crate::pairs::PairFolder::rectify_record`]
+/// by `teacher` (the disparity range) and `masks --pairs` (the cameras and homographies).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RectifyRecord {
+    pub stem: String,
+    /// The raw images.
+    pub left: PathBuf,
+    pub right: PathBuf,
+    /// The JSON cameras, when the images' RPC tags were not used.
+    pub rpc_left: Option<PathBuf>,
+    pub rpc_right: Option<PathBuf>,
+    /// Region of the left raw image.
+    pub roi: Roi,
+    /// Altitudes of the scene, metres, and where they came from.
+    pub alt_range: (f64, f64),
+    #[serde(rename = "alt_range_source")]
+    pub alt_source: String,
+    /// Disparity search range of the rectified pair, pixels (inclusive).
+    pub disparity_range: (i32, i32),
+    /// `(width, height)` of the rectified images.
+    pub size: (usize, usize),
+    /// Where the region lies in the rectified frame.
+    pub roi_in_frame: Roi,
+    pub flipped: bool,
+    pub pixels_per_metre: f64,
+    pub max_row_error_px: f64,
+    /// Share of the region the right image covers.
+    pub right_coverage: f64,
+    #[serde(rename = "Hleft")]
+    pub h_left: [[f64; 3]; 3],
+    #[serde(rename = "Hright")]
+    pub h_right: [[f64; 3]; 3],
+    pub files: RectifiedFiles,
+}
+
+/// The files of a rectified pair.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RectifiedFiles {
+    pub left: PathBuf,
+    pub right: PathBuf,
+    pub homography: PathBuf,
+}
+
+/// The raw inputs of a rectification, as recorded.
+pub(crate) struct RawInputs<'a> {
     pub stem: &'a str,
     pub left: &'a Path,
     pub right: &'a Path,
@@ -164,39 +209,40 @@ pub(crate) struct RectifyRecord<'a> {
     pub roi: Roi,
     pub alt_range: (f64, f64),
     pub alt_source: &'a str,
-    pub right_coverage: f64,
-    /// The rectified left and right images and the homographies.
-    pub files: [&'a Path; 3],
 }
 
-impl RectifyRecord<'_> {
-    pub fn to_json(&self, rect: &Rectification) -> serde_json::Value {
-        let (rx, ry, rw, rh) = rect.roi_in_frame;
-        let (lo, hi) = rect.disparity_range;
-        json!({
-            "stem": self.stem,
-            "left": self.left.display().to_string(),
-            "right": self.right.display().to_string(),
-            "rpc_left": self.rpc_left.map(|p| p.display().to_string()),
-            "rpc_right": self.rpc_right.map(|p| p.display().to_string()),
-            "roi": self.roi,
-            "alt_range": [self.alt_range.0, self.alt_range.1],
-            "alt_range_source": self.alt_source,
-            "disparity_range": [lo, hi],
-            "size": [rect.size.0, rect.size.1],
-            "roi_in_frame": {"x": rx, "y": ry, "width": rw, "height": rh},
-            "flipped": rect.flipped,
-            "pixels_per_metre": rect.pixels_per_metre,
-            "max_row_error_px": rect.max_row_error,
-            "right_coverage": self.right_coverage,
-            "Hleft": rect.h_left.0,
-            "Hright": rect.h_right.0,
-            "files": {
-                "left": self.files[0].display().to_string(),
-                "right": self.files[1].display().to_string(),
-                "homography": self.files[2].display().to_string(),
+impl RectifyRecord {
+    pub(crate) fn new(
+        raw: &RawInputs,
+        rect: &Rectification,
+        right_coverage: f64,
+        files: &PairPaths,
+    ) -> Self {
+        let (x, y, width, height) = rect.roi_in_frame;
+        RectifyRecord {
+            stem: raw.stem.to_string(),
+            left: raw.left.to_path_buf(),
+            right: raw.right.to_path_buf(),
+            rpc_left: raw.rpc_left.map(Path::to_path_buf),
+            rpc_right: raw.rpc_right.map(Path::to_path_buf),
+            roi: raw.roi,
+            alt_range: raw.alt_range,
+            alt_source: raw.alt_source.to_string(),
+            disparity_range: rect.disparity_range,
+            size: rect.size,
+            roi_in_frame: Roi::new(x, y, width, height),
+            flipped: rect.flipped,
+            pixels_per_metre: rect.pixels_per_metre,
+            max_row_error_px: rect.max_row_error,
+            right_coverage,
+            h_left: rect.h_left.0,
+            h_right: rect.h_right.0,
+            files: RectifiedFiles {
+                left: files.left.clone(),
+                right: files.right.clone(),
+                homography: files.homography.clone(),
             },
-        })
+        }
     }
 }
 
@@ -238,15 +284,13 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
 
     let right_coverage = right_coverage(&pair.right, rect);
 
-    let dir = &opts.out_dir;
-    let left_path = dir.join("L").join(format!("{stem}.iio"));
-    let right_path = dir.join("R").join(format!("{stem}.iio"));
-    let homography = dir.join("homography").join(format!("{stem}.npz"));
-    let report = dir.join("rectify").join(format!("{stem}.json"));
-    write_npy(&left_path, &pair.left)?;
-    write_npy(&right_path, &pair.right)?;
-    write_homographies(&homography, &pair.h_left, &pair.h_right)?;
-    let record = RectifyRecord {
+    let folder = PairFolder::new(&opts.out_dir);
+    let files = folder.paths(&stem);
+    let report = folder.rectify_record_path(&stem);
+    write_npy(&files.left, &pair.left)?;
+    write_npy(&files.right, &pair.right)?;
+    write_homographies(&files.homography, &pair.h_left, &pair.h_right)?;
+    let raw = RawInputs {
         stem: &stem,
         left: &opts.left,
         right: &opts.right,
@@ -255,10 +299,17 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
         roi,
         alt_range,
         alt_source,
-        right_coverage,
-        files: [&left_path, &right_path, &homography],
     };
-    write_json(&report, &record.to_json(rect))?;
+    write_json(
+        &report,
+        &RectifyRecord::new(&raw, rect, right_coverage, &files),
+    )?;
+    let PairPaths {
+        left: left_path,
+        right: right_path,
+        homography,
+        ..
+    } = files;
     Ok(RectifySummary {
         stem,
         left: left_path,

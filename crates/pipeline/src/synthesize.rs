@@ -21,19 +21,17 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use dataset::shard::Shard;
-use dataset::{PairStem, Side};
-use raster::formats::{read_homographies, write_geotiff, write_npy, GeoTiffMeta};
-use raster::geometry::{centre_crop, warp_homography};
+use dataset::PairStem;
+use raster::formats::{write_geotiff, GeoTiffMeta};
+use raster::geometry::centre_crop;
 use raster::{Homography, Image};
 use serde::{Deserialize, Serialize};
 use synth::fidelity::FidelityParams;
 use synth::{Season, SeasonGenerator, SourceImage};
 
+use crate::pairs::PairFolder;
 use crate::progress::Progress;
-use crate::teacher::batch::{run_items, BatchSummary};
-
-/// The generators' crate, for callers that only depend on `pipeline` (the CLI).
-pub use ::synth;
+use crate::stage::{claim_folder, read_json, run_items, write_json, BatchSummary};
 
 /// Default centre crop, pixels (the paper's 1024² of a 2048² tile).
 pub const DEFAULT_CROP: usize = 1024;
@@ -79,14 +77,6 @@ impl SyntheticLayout {
         self.root.join("variants").join(format!("{id}.json"))
     }
 
-    /// A variant rectified into its pair's frame: `rectified/<pair>/<L|R>_<tag>.npy`.
-    pub fn rectified(&self, pair: &str, side: Side, tag: &str) -> PathBuf {
-        self.root
-            .join("rectified")
-            .join(pair)
-            .join(format!("{}_{tag}.npy", side.dir()))
-    }
-
     /// Every rejected variant, one line each.
     pub fn rejected_csv(&self) -> PathBuf {
         self.root.join("rejected.csv")
@@ -99,33 +89,13 @@ impl SyntheticLayout {
 
     /// The crop record of `id`, `None` when `synthesize` has not cropped it.
     pub fn read_crop(&self, id: &str) -> Result<Option<CropRecord>> {
-        read_json_optional(&self.crop_record(id))
+        read_json(&self.crop_record(id))
     }
 
     /// The variant record of `id`, `None` when the image is not finished.
     pub fn read_variants(&self, id: &str) -> Result<Option<VariantRecord>> {
-        read_json_optional(&self.variant_record(id))
+        read_json(&self.variant_record(id))
     }
-}
-
-fn read_json_optional<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<Option<T>> {
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let v = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{} is malformed (delete it to redo that image)",
-            path.display()
-        )
-    })?;
-    Ok(Some(v))
-}
-
-fn write_json_value<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let v = serde_json::to_value(value)?;
-    crate::world_io::write_json(path, &v)
 }
 
 /// Where a crop lies in its raw image.
@@ -144,14 +114,14 @@ impl CropRecord {
     /// The crop of a `w × h` image to at most `crop × crop`, centred as
     /// [`raster::geometry::centre_crop`] does.
     pub fn centred(w: usize, h: usize, crop: usize) -> Self {
-        let (cw, ch) = (w.min(crop), h.min(crop));
+        let (x0, y0, width, height) = raster::geometry::centre_window(w, h, crop, crop);
         CropRecord {
             source_width: w,
             source_height: h,
-            x0: (w - cw) / 2,
-            y0: (h - ch) / 2,
-            width: cw,
-            height: ch,
+            x0,
+            y0,
+            width,
+            height,
         }
     }
 
@@ -234,14 +204,12 @@ pub struct SynthesizeSummary {
     /// Variants accepted / rejected in this run.
     pub accepted: usize,
     pub rejected: usize,
-    /// Pairs of this shard whose variants were rectified now, and those waiting for another shard.
-    pub pairs_rectified: usize,
-    pub pairs_waiting: usize,
 }
 
 /// The selected pairs: from the list, or every pair of `pairs_dir`; sorted.
 pub fn selected_pairs(pairs_dir: &Path, selected: Option<&Path>) -> Result<Vec<PairStem>> {
-    let all: Vec<PairStem> = crate::teacher::list_pairs(pairs_dir)?
+    let all: Vec<PairStem> = PairFolder::new(pairs_dir)
+        .list()?
         .into_iter()
         .map(|p| PairStem::parse(&p.stem))
         .collect::<Result<_, _>>()?;
@@ -362,46 +330,39 @@ pub fn run_synthesize(
     summary.rejected = rejected;
     write_rejected_csv(&layout, &ids)?;
 
-    // Rectify the pairs of this shard whose images are finished.
-    let mine = opts.shard.select(&pairs);
-    progress.begin("rectifying variants", mine.len());
-    for (k, pair) in mine.iter().enumerate() {
-        let ready = layout.variant_record(&pair.left.id).is_file()
-            && layout.variant_record(&pair.right.id).is_file();
-        if ready {
-            rectify_pair_variants(&layout, &opts.pairs_dir, pair)?;
-            summary.pairs_rectified += 1;
-        } else {
-            summary.pairs_waiting += 1;
-        }
-        progress.advance(k + 1);
-    }
-    progress.end();
     Ok(summary)
+}
+
+/// `synthesize.json`: the generator that made a folder's variants.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GeneratorRecord {
+    pub generator: String,
 }
 
 /// Records the generator in `synthesize.json`; a folder made by another generator is refused so
 /// variants are never mixed.
 fn claim_generator(layout: &SyntheticLayout, name: &str) -> Result<()> {
-    let record = serde_json::json!({ "generator": name });
-    let path = layout.record();
-    if let Some(old) = read_json_optional::<serde_json::Value>(&path)? {
-        if old.get("generator") != record.get("generator") {
-            bail!(
+    let record = GeneratorRecord {
+        generator: name.to_string(),
+    };
+    claim_folder(
+        &layout.record(),
+        &record,
+        |old, new| old == new,
+        |old| {
+            format!(
                 "{} holds variants of generator {} (not {name}): use another output folder",
                 layout.root.display(),
-                old.get("generator").unwrap_or(&serde_json::Value::Null)
-            );
-        }
-        return Ok(());
-    }
-    crate::world_io::write_json(&path, &record)
+                old.generator
+            )
+        },
+    )
 }
 
 /// The generator recorded in a synthesize folder.
 pub fn recorded_generator(dir: &Path) -> Result<Option<String>> {
-    let v: Option<serde_json::Value> = read_json_optional(&SyntheticLayout::new(dir).record())?;
-    Ok(v.and_then(|v| v.get("generator")?.as_str().map(str::to_string)))
+    let record: Option<GeneratorRecord> = read_json(&SyntheticLayout::new(dir).record())?;
+    Ok(record.map(|r| r.generator))
 }
 
 fn synthesize_image(
@@ -449,7 +410,7 @@ fn synthesize_image(
     if !layout.cropped(id).is_file() {
         write_geotiff(layout.cropped(id), &cropped, &GeoTiffMeta::default())?;
     }
-    write_json_value(&layout.crop_record(id), &crop)?;
+    write_json(&layout.crop_record(id), &crop)?;
     let mut source = SourceImage::new(id, &cropped);
     if let Some(c) = &class_crop {
         source = source.with_classes(c);
@@ -493,7 +454,7 @@ fn synthesize_image(
         generator: generator.name(),
         seasons,
     };
-    write_json_value(&layout.variant_record(id), &record)?;
+    write_json(&layout.variant_record(id), &record)?;
     Ok(record)
 }
 
@@ -512,97 +473,6 @@ fn write_rejected_csv(layout: &SyntheticLayout, ids: &[String]) -> Result<()> {
         w.write_all(text.as_bytes())
     })?;
     Ok(())
-}
-
-/// The homographies of a synchronic pair.
-pub fn pair_homographies(pairs_dir: &Path, pair: &PairStem) -> Result<(Homography, Homography)> {
-    let path = pairs_dir
-        .join("homography")
-        .join(format!("{}.npz", pair.base_name()));
-    if !path.is_file() {
-        bail!(
-            "{} is missing: variants and masks are rectified with the pair's homographies \
-             (written by `seasonstereo rectify`, or the release's synchronic_only/homography)",
-            path.display()
-        );
-    }
-    Ok(read_homographies(&path)?)
-}
-
-/// Size (width, height) of the rectified real pair.
-pub fn rectified_size(pairs_dir: &Path, pair: &PairStem) -> Result<(usize, usize)> {
-    let name = pair.base_name();
-    let left = crate::teacher::pairs::find_image(&pairs_dir.join("L"), &name)?
-        .with_context(|| format!("no L/{name}.iio in {}", pairs_dir.display()))?;
-    Ok(raster::read_image(left)?.size())
-}
-
-/// The variant `tag` of the `side` image of `pair`, rectified into the pair's frame (`size`):
-/// read from `rectified/` when there, else warped from `cropped-synthetic/` and cached there.
-/// Outside the crop's footprint the image is 0.
-pub fn rectified_variant(
-    layout: &SyntheticLayout,
-    pair: &PairStem,
-    side: Side,
-    tag: &str,
-    h: &Homography,
-    size: (usize, usize),
-) -> Result<Image> {
-    let out = layout.rectified(&pair.base_name(), side, tag);
-    if out.is_file() {
-        let im = raster::read_image(&out)?;
-        if im.size() == size {
-            return Ok(im);
-        }
-    }
-    let id = match side {
-        Side::Left => &pair.left.id,
-        Side::Right => &pair.right.id,
-    };
-    let crop = layout.read_crop(id)?.with_context(|| {
-        format!(
-            "{} is missing: run `seasonstereo synthesize` for image {id}",
-            layout.crop_record(id).display()
-        )
-    })?;
-    let src = layout.variant(id, tag);
-    let variant = raster::read_image(&src)?;
-    if variant.size() != (crop.width, crop.height) {
-        bail!(
-            "{} is {}x{} but its crop is {}x{}",
-            src.display(),
-            variant.width(),
-            variant.height(),
-            crop.width,
-            crop.height
-        );
-    }
-    let (mut image, _) = warp_homography(&variant.to_rgb(), &crop.adapt(h), size.0, size.1)?;
-    zero_invalid(&mut image);
-    write_npy(&out, &image)?;
-    Ok(image)
-}
-
-/// Rectifies every accepted variant of both images of `pair` (skipping those already there).
-pub fn rectify_pair_variants(
-    layout: &SyntheticLayout,
-    pairs_dir: &Path,
-    pair: &PairStem,
-) -> Result<usize> {
-    let tags = accepted_tags(layout, pair)?;
-    if tags.values().all(Vec::is_empty) {
-        return Ok(0);
-    }
-    let (hl, hr) = pair_homographies(pairs_dir, pair)?;
-    let size = rectified_size(pairs_dir, pair)?;
-    let mut n = 0;
-    for (side, h) in [(Side::Left, hl), (Side::Right, hr)] {
-        for tag in &tags[side.dir()] {
-            rectified_variant(layout, pair, side, tag, &h, size)?;
-            n += 1;
-        }
-    }
-    Ok(n)
 }
 
 /// Accepted tags of each side of `pair` (`"L"`, `"R"`), from the finished images' records.

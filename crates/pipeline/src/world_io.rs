@@ -30,38 +30,15 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use camera::{DsmGrid, Points, UtmZone};
 use raster::formats::{
-    write_atomically, write_geotiff, write_homographies, write_npy, write_png, GeoTiffMeta,
-    PngDepth,
+    write_geotiff, write_homographies, write_npy, write_png, GeoTiffMeta, PngDepth,
 };
 use raster::Image;
 use serde_json::json;
 use world::World;
 
 use crate::eval::layout::{AoiRule, TruthFiles};
-
-/// The files of one rectified pair in the release layout.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PairPaths {
-    pub stem: String,
-    pub left: PathBuf,
-    pub right: PathBuf,
-    pub homography: PathBuf,
-    pub disparity: PathBuf,
-}
-
-impl PairPaths {
-    /// Paths of pair `stem` under the dataset folder `root`.
-    pub fn new(root: &Path, stem: &str) -> Self {
-        let file = |dir: &str, ext: &str| root.join(dir).join(format!("{stem}.{ext}"));
-        PairPaths {
-            stem: stem.to_string(),
-            left: file("L", "iio"),
-            right: file("R", "iio"),
-            homography: file("homography", "npz"),
-            disparity: file("disparity", "iio"),
-        }
-    }
-}
+use crate::pairs::{PairFolder, PairPaths};
+use crate::stage::write_json;
 
 /// Image ids of a world named `name`: `<name>_A` (left) and `<name>_B` (right).
 pub fn image_ids(name: &str) -> Result<(String, String)> {
@@ -75,7 +52,7 @@ pub fn image_ids(name: &str) -> Result<(String, String)> {
 pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
     let (left_id, right_id) = image_ids(name)?;
     let stem = format!("{left_id}-{right_id}");
-    let paths = PairPaths::new(root, &stem);
+    let paths = PairFolder::new(root).paths(&stem);
     let (w, h) = world.disparity.size();
     write_npy(&paths.left, &world.left.image)?;
     write_npy(&paths.right, &world.right.image)?;
@@ -280,13 +257,6 @@ pub fn mask_picture(mask: &raster::Mask) -> raster::Image {
         .map(|&v| if v { 255.0 } else { 0.0 })
         .collect();
     raster::Image::new(mask.width(), mask.height(), 1, data).expect("sizes match")
-}
-
-/// Writes pretty JSON atomically.
-pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
-    write_atomically(path, |f| std::io::Write::write_all(f, text.as_bytes()))
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 #[cfg(test)]

@@ -35,9 +35,10 @@ use world::{class, WorldParams};
 
 use crate::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
 use crate::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter};
+use crate::matcher::Matcher;
 use crate::progress::Progress;
 use crate::synthesize::{run_synthesize, SynthesizeOptions, SynthesizeSummary};
-use crate::teacher::{run_teacher, Teacher, TeacherOptions};
+use crate::teacher::{run_teacher, TeacherOptions};
 
 /// What `dataset world` builds.
 #[derive(Clone, Debug)]
@@ -156,10 +157,8 @@ pub fn build_world_training(
                 &TeacherOptions {
                     pairs_dir: pairs.clone(),
                     out_dir: t.clone(),
-                    teacher: Teacher::Sgm {
-                        params: opts.sgm.clone(),
-                        range: Some(range),
-                    },
+                    matcher: Matcher::Classical(opts.sgm.clone()),
+                    range: Some(range),
                     shard: Shard::ALL,
                 },
                 progress,

@@ -3,12 +3,13 @@
 
 use std::path::Path;
 
+use dataset::Shard;
 use matching::SgmParams;
 use pipeline::curate::features::HistogramDescriptor;
 use pipeline::curate::select::{roc_auc, Keep};
 use pipeline::curate::{run_curate, ColourStatistic, CurateOptions, SsimScale};
-use pipeline::teacher::batch::Shard;
-use pipeline::teacher::{run_teacher, Teacher, TeacherOptions};
+use pipeline::matcher::Matcher;
+use pipeline::teacher::{run_teacher, TeacherOptions};
 use pipeline::Silent;
 use raster::Image;
 
@@ -146,10 +147,8 @@ fn sgm_teacher(pairs: &Path, out: &Path, range: (i32, i32), shard: Shard) -> Tea
     TeacherOptions {
         pairs_dir: pairs.to_path_buf(),
         out_dir: out.to_path_buf(),
-        teacher: Teacher::Sgm {
-            params: SgmParams::default(),
-            range: Some(range),
-        },
+        matcher: Matcher::Classical(SgmParams::default()),
+        range: Some(range),
         shard,
     }
 }
@@ -353,10 +352,8 @@ fn shards_cover_every_pair_once_and_rank_at_the_end() {
     assert_eq!(record["teacher"], "sgm");
     // Another teacher into the same folder is refused.
     let other = TeacherOptions {
-        teacher: Teacher::Sgm {
-            params: SgmParams::default(),
-            range: Some((0, 10)),
-        },
+        matcher: Matcher::Classical(SgmParams::default()),
+        range: Some((0, 10)),
         ..sgm_teacher(&pairs, &teacher, range, Shard::ALL)
     };
     let err = format!("{:#}", run_teacher(&other, &Silent).unwrap_err());
@@ -421,6 +418,9 @@ fn missing_teacher_disparity_names_the_file() {
     );
     // A left image without its right image.
     raster::write_image(pairs.join("L").join("C-D.iio"), &img).unwrap();
-    let msg = format!("{:#}", pipeline::teacher::list_pairs(&pairs).unwrap_err());
+    let msg = format!(
+        "{:#}",
+        pipeline::pairs::PairFolder::new(&pairs).list().unwrap_err()
+    );
     assert!(msg.contains("R/C-D.iio"), "{msg}");
 }

@@ -10,8 +10,9 @@ use dataset::layout::{DatasetDir, MaskKind};
 use dataset::manifest::Manifest;
 use dataset::{load_sample, PairKind, PairStem, SampleIndex, Shard, Side, Subset};
 use pipeline::dataset_build::{run_build, BuildOptions, MaskDirs};
+use pipeline::matcher::Matcher;
 use pipeline::synthesize::{run_synthesize, SynthesizeOptions};
-use pipeline::teacher::{run_teacher, Teacher, TeacherOptions};
+use pipeline::teacher::{run_teacher, TeacherOptions};
 use pipeline::world_training::{
     build_world_training, world_ids, world_range, write_world_sources, WorldTrainingOptions,
 };
@@ -192,10 +193,8 @@ fn sources(root: &Path) -> (PathBuf, PathBuf, PathBuf) {
         &TeacherOptions {
             pairs_dir: pairs.clone(),
             out_dir: teacher.clone(),
-            teacher: Teacher::Sgm {
-                params: matching::SgmParams::default(),
-                range: Some(world_range(SIZE)),
-            },
+            matcher: Matcher::Classical(matching::SgmParams::default()),
+            range: Some(world_range(SIZE)),
             shard: Shard::ALL,
         },
         &Silent,
@@ -369,7 +368,6 @@ fn rejected_variants_are_listed_and_never_used() {
     syn.classes_dir = Some(src.join("classes"));
     let s = run_synthesize(&syn, &generator, &Silent).unwrap();
     assert_eq!((s.accepted, s.rejected), (6, 2));
-    assert_eq!(s.pairs_rectified, 1);
     assert_eq!(generator.calls.load(std::sync::atomic::Ordering::SeqCst), 8);
     let (a, b) = world_ids(31);
     let rejected = std::fs::read_to_string(syn_dir.join("rejected.csv")).unwrap();
@@ -383,9 +381,6 @@ fn rejected_variants_are_listed_and_never_used() {
         .exists());
     assert!(syn_dir
         .join(format!("cropped-synthetic/{a}_summer.tif"))
-        .is_file());
-    assert!(syn_dir
-        .join(format!("rectified/{a}-{b}/R_autumn.npy"))
         .is_file());
     assert_eq!(generator.name(), "shifted-winter");
 

@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use matching::SgmParams;
+#[cfg(feature = "network")]
 use pipeline::demo::ablation::{run_ablation, AblationOptions, CROSS_SEASON, SYNCHRONIC};
 use pipeline::demo::{run_demo, DemoOptions, DemoSummary};
 use pipeline::Silent;
@@ -136,6 +137,7 @@ fn demo_tells_the_season_story_and_keeps_its_accuracy() {
 /// different lists, every method is scored on both held-out splits, and the report holds the
 /// table, the curves and no debug text.
 #[test]
+#[cfg(feature = "network")]
 fn ablation_trains_s1_and_s3_on_different_data_and_reports_the_table() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path();

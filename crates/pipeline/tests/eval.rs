@@ -336,7 +336,9 @@ fn world_ground_truth_and_sgm_through_the_whole_chain() {
     let sgm_opts = EvalOptions::world(
         &wdir,
         "World",
-        Method::Sgm(matching::SgmParams::default()),
+        Method::Matcher(pipeline::matcher::Matcher::Classical(
+            matching::SgmParams::default(),
+        )),
         &out,
     );
     let r = evaluate(&sgm_opts, &Silent).unwrap();

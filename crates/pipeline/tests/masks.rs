@@ -2,12 +2,12 @@
 //! file conventions of the writer.
 
 use dataset::masks::{from_segmentation, MaskFile};
-use nn::segformer::MaskKind;
+use dataset::segmentation::MaskKind;
+use dataset::Shard;
 use pipeline::masks::offline::{class_iou, PixelClassifier, TRAINING_SEEDS};
 use pipeline::masks::{
     mask_path, prob_path, run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter,
 };
-use pipeline::teacher::batch::Shard;
 use pipeline::Silent;
 use world::class;
 
@@ -243,7 +243,7 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
             filled: above,
             pairs: vec![],
         };
-        let options = MaskKind::ALL.map(nn::segformer::MaskOptions::defaults);
+        let options = MaskKind::ALL.map(dataset::segmentation::MaskOptions::defaults);
         let s = pipeline::masks::rules::segment(&w.left.image, Some(&heights), &options).unwrap();
         for (k, (kind, id)) in [
             (MaskKind::Tree, class::TREE),

@@ -12,7 +12,8 @@ use pipeline::dsm::GridChoice;
 use pipeline::masks::heights::PairIndex;
 use pipeline::masks::score::{read_masks, score_folder, score_masks, ClassTruth, ImageScore};
 use pipeline::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter};
-use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
+use pipeline::matcher::Matcher;
+use pipeline::reconstruct::{reconstruct, ReconstructOptions};
 use pipeline::Silent;
 
 mod common;

@@ -10,7 +10,8 @@ use std::path::Path;
 use camera::UtmZone;
 use matching::SgmParams;
 use pipeline::dsm::GridChoice;
-use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions};
+use pipeline::matcher::Matcher;
+use pipeline::reconstruct::{reconstruct, ReconstructOptions};
 use pipeline::Silent;
 
 mod common;

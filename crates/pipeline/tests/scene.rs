@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use camera::{read_dsm, Gridding};
 use matching::SgmParams;
 use pipeline::dsm::GridChoice;
+use pipeline::matcher::Matcher;
 use pipeline::reconstruct::tile::TileStatus;
-use pipeline::reconstruct::{reconstruct, Matcher, ReconstructOptions, ReconstructSummary};
+use pipeline::reconstruct::{reconstruct, ReconstructOptions, ReconstructSummary};
 use pipeline::Silent;
 
 const SIZE: usize = 320;
@@ -141,7 +142,7 @@ fn shards_assemble_the_dsm_of_one_run_and_resume_skips_finished_tiles() {
 
     let out = dir.path().join("sharded.tif");
     let shard = |i| ReconstructOptions {
-        shard: pipeline::dataset_build::dataset::Shard::new(i, 3).unwrap(),
+        shard: dataset::Shard::new(i, 3).unwrap(),
         ..options(&root, &out, 160)
     };
     let first = reconstruct(&shard(0), &Silent).unwrap();
@@ -226,6 +227,7 @@ fn a_broken_image_fails_its_tiles_only_and_a_tight_budget_names_the_fix() {
 
 /// With weights, every tile is matched by MonSter++ (the tiny parity fixture: the geometry runs,
 /// the accuracy of random-ish weights is not the point), its strips planned inside the budget.
+#[cfg(feature = "network")]
 #[test]
 fn the_network_matches_every_tile_when_weights_are_given() {
     let dir = tempfile::tempdir().unwrap();
@@ -237,10 +239,10 @@ fn the_network_matches_every_tile_when_weights_are_given() {
         "fixture {} is missing",
         weights.display()
     );
-    let mut net = pipeline::predict::MonsterOptions::new(weights, "tiny");
-    net.device = "cpu".into();
+    let mut net = pipeline::matcher::MonsterOptions::new(weights, "tiny");
+    net.device = nn::device::DeviceChoice::Cpu;
     let opts = ReconstructOptions {
-        matcher: Matcher::Network(net),
+        matcher: Matcher::Network(net.load().unwrap()),
         ..options(&root, &dir.path().join("net.tif"), 160)
     };
     let s = reconstruct(&opts, &Silent).unwrap();

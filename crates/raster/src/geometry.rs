@@ -5,6 +5,19 @@ use rayon::prelude::*;
 
 use crate::{Image, Mask, RasterError, Result};
 
+/// The 8 neighbour steps `(dx, dy)` of a pixel, opposite steps side by side (E, W, S, N, SE, NW,
+/// NE, SW): the directions of MGM's paths and of the DSM hole filling's rays.
+pub const EIGHT_DIRECTIONS: [(i64, i64); 8] = [
+    (1, 0),
+    (-1, 0),
+    (0, 1),
+    (0, -1),
+    (1, 1),
+    (-1, -1),
+    (1, -1),
+    (-1, 1),
+];
+
 /// A 3×3 projective transform of pixel coordinates, row-major, `f64`. In the public release,
 /// `Hleft`/`Hright` map raw image coordinates to rectified coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -191,10 +204,21 @@ pub fn centre_crop(image: &Image, width: usize, height: usize) -> Result<(Image,
             image.height()
         )));
     }
-    let x0 = (image.width() - width) / 2;
-    let y0 = (image.height() - height) / 2;
+    let (x0, y0, _, _) = centre_window(image.width(), image.height(), width, height);
     let cropped = crop(image, x0, y0, width, height)?;
     Ok((cropped, Homography::translation(-(x0 as f64), -(y0 as f64))))
+}
+
+/// The central window of at most `max_width × max_height` pixels of a `width × height` image:
+/// `(x0, y0, w, h)` with `(x0, y0) = ((width − w)/2, (height − h)/2)`, as [`centre_crop`] cuts it.
+pub fn centre_window(
+    width: usize,
+    height: usize,
+    max_width: usize,
+    max_height: usize,
+) -> (usize, usize, usize, usize) {
+    let (w, h) = (width.min(max_width), height.min(max_height));
+    ((width - w) / 2, (height - h) / 2, w, h)
 }
 
 /// Updates a raw→rectified homography when the rectified image is cropped with its top-left

@@ -52,17 +52,11 @@ impl Image {
 
     /// A single-channel image computed pixel by pixel.
     pub fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> f32) -> Self {
-        let mut data = Vec::with_capacity(width * height);
-        for y in 0..height {
-            for x in 0..width {
-                data.push(f(x, y));
-            }
-        }
         Self {
             width,
             height,
             channels: 1,
-            data,
+            data: row_major(width, height, f),
         }
     }
 
@@ -255,16 +249,10 @@ impl Mask {
     }
 
     pub fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> bool) -> Self {
-        let mut data = Vec::with_capacity(width * height);
-        for y in 0..height {
-            for x in 0..width {
-                data.push(f(x, y));
-            }
-        }
         Self {
             width,
             height,
-            data,
+            data: row_major(width, height, f),
         }
     }
 
@@ -357,6 +345,14 @@ impl Mask {
             data,
         }
     }
+}
+
+/// `f(x, y)` of every pixel, row by row.
+fn row_major<T>(width: usize, height: usize, f: impl Fn(usize, usize) -> T) -> Vec<T> {
+    (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| f(x, y))
+        .collect()
 }
 
 #[cfg(test)]

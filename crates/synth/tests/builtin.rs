@@ -31,7 +31,7 @@ fn mean_colour_distance(a: &Image, b: &Image) -> f64 {
 
 /// (share of matched pixels with |d| < 0.5, share of pixels matched).
 fn zero_disparity_share(source: &Image, variant: &Image) -> (f64, f64) {
-    let d = match_pair(source, variant, &SgmParams::with_range(-4, 4)).unwrap();
+    let d = match_pair(source, variant, (-4, 4), &SgmParams::default()).unwrap();
     let matched: Vec<f32> = d.data().iter().copied().filter(|v| v.is_finite()).collect();
     let good = matched.iter().filter(|v| v.abs() < 0.5).count();
     (

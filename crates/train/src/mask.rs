@@ -92,8 +92,7 @@ pub fn supervision_mask(
 /// column (the closest surface wins). Non-finite disparities are not visible and take no part in
 /// the z-buffer.
 ///
-/// This differs from `matching::occlusion::zbuffer_occlusion` (the paper's strict test, one winner
-/// per column, half-up rounding): the release keeps every near-tie visible, which matters on
+/// Unlike a strict z-buffer (one winner per column, half-up rounding), the release keeps every near-tie visible, which matters on
 /// slanted roofs where neighbouring pixels compress onto one column.
 pub fn zbuffer_visible(disparity: &[f32], width: usize) -> Result<Vec<bool>, MaskError> {
     check_rows("zbuffer_visible", disparity.len(), width)?;

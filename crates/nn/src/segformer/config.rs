@@ -2,18 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// The OpenEarthMap class names, in id order (the checkpoint's `id2label`).
-pub const OPENEARTHMAP_LABELS: [&str; 9] = [
-    "Background",
-    "Bareland",
-    "Grass",
-    "Pavement",
-    "Road",
-    "Tree",
-    "Water",
-    "Cropland",
-    "Building",
-];
+pub use dataset::segmentation::OPENEARTHMAP_LABELS;
 
 /// Layout of a `SegformerForSemanticSegmentation` (4 stages).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -34,8 +34,8 @@ use burn::tensor::Device;
 use raster::Image;
 
 pub use config::SegformerConfig;
+use dataset::segmentation::{MaskKind, MaskOptions, Segmentation};
 pub use model::Segformer;
-pub use postprocess::{ClassMask, MaskKind, MaskOptions, Segmentation};
 pub use trace::Trace;
 
 use crate::weights::{LoadReport, WeightsError};
@@ -49,6 +49,9 @@ pub enum SegformerError {
     /// A raster operation failed (sizes).
     #[error(transparent)]
     Raster(#[from] raster::RasterError),
+    /// The masks could not be made from the scores.
+    #[error(transparent)]
+    Masks(#[from] dataset::DatasetError),
     /// Bad input (not 8-bit, empty, bad configuration).
     #[error("segmentation: {0}")]
     Input(String),

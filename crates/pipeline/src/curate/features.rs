@@ -15,63 +15,76 @@ pub trait FeatureSimilarity {
     fn similarity(&self, left: &Image, left_hat: &Image, valid: &Mask) -> Result<f64>;
 }
 
-/// DINOv3 with weights: the release's score (`nn::dinov3::Dinov3Features::similarity`: masked
-/// uint8 images, 224² antialiased resize, CLS token after the final LayerNorm, cosine).
-pub struct Dinov3Similarity {
-    pub features: nn::dinov3::Dinov3Features,
-}
+#[cfg(feature = "network")]
+pub use dinov3::Dinov3Similarity;
 
-impl Dinov3Similarity {
-    /// Loads an HF DINOv3 checkpoint: layout from `preset` (`vits16`, `vitb16`, `vitl16`,
-    /// `tiny`) or inferred from the checkpoint; `normalisation` `imagenet` (the HF processor's
-    /// default) or `sat493m`; `device` `auto`, `cpu`, `wgpu` or `cuda`.
-    pub fn load(
-        weights: &std::path::Path,
-        preset: Option<&str>,
-        normalisation: &str,
-        device: &str,
-    ) -> Result<Self> {
-        use anyhow::Context;
-        use nn::dinov3::{Dinov3Config, Dinov3Features, Dinov3Preprocess, Normalization};
-        let config = match preset {
-            Some(p) => Dinov3Config::preset(p).with_context(|| {
-                format!("unknown DINOv3 preset {p:?} (expected vits16, vitb16, vitl16 or tiny)")
-            })?,
-            None => Dinov3Config::from_checkpoint(weights)?,
-        };
-        let normalization = Normalization::by_name(normalisation).with_context(|| {
-            format!("unknown DINOv3 normalisation {normalisation:?} (expected imagenet or sat493m)")
-        })?;
-        let device = nn::infer::device_by_name(device).map_err(anyhow::Error::msg)?;
-        let features = Dinov3Features::from_file(weights, config, device)
-            .with_context(|| format!("loading DINOv3 from {}", weights.display()))?
-            .with_preprocess(Dinov3Preprocess {
-                normalization,
-                ..Dinov3Preprocess::default()
+#[cfg(feature = "network")]
+mod dinov3 {
+    use anyhow::Result;
+    use raster::{Image, Mask};
+
+    use super::FeatureSimilarity;
+
+    /// DINOv3 with weights: the release's score (`nn::dinov3::Dinov3Features::similarity`: masked
+    /// uint8 images, 224² antialiased resize, CLS token after the final LayerNorm, cosine).
+    pub struct Dinov3Similarity {
+        pub features: nn::dinov3::Dinov3Features,
+    }
+
+    impl Dinov3Similarity {
+        /// Loads an HF DINOv3 checkpoint: layout from `preset` (`vits16`, `vitb16`, `vitl16`,
+        /// `tiny`) or inferred from the checkpoint; `normalisation` `imagenet` (the HF processor's
+        /// default) or `sat493m`.
+        pub fn load(
+            weights: &std::path::Path,
+            preset: Option<&str>,
+            normalisation: &str,
+            device: nn::device::DeviceChoice,
+        ) -> Result<Self> {
+            use anyhow::Context;
+            use nn::dinov3::{Dinov3Config, Dinov3Features, Dinov3Preprocess, Normalization};
+            let config = match preset {
+                Some(p) => Dinov3Config::preset(p).with_context(|| {
+                    format!("unknown DINOv3 preset {p:?} (expected vits16, vitb16, vitl16 or tiny)")
+                })?,
+                None => Dinov3Config::from_checkpoint(weights)?,
+            };
+            let normalization = Normalization::by_name(normalisation).with_context(|| {
+                format!(
+                    "unknown DINOv3 normalisation {normalisation:?} (expected imagenet or sat493m)"
+                )
             })?;
-        Ok(Dinov3Similarity { features })
-    }
-}
-
-impl FeatureSimilarity for Dinov3Similarity {
-    fn name(&self) -> String {
-        let (weights, _) = self.features.weights();
-        let c = self.features.config();
-        let p = self.features.preprocess();
-        format!(
-            "dinov3 ({}, hidden {}, {} layers, {}x{} input, mean {:?} std {:?})",
-            weights.display(),
-            c.hidden_size,
-            c.num_hidden_layers,
-            p.width,
-            p.height,
-            p.normalization.mean,
-            p.normalization.std
-        )
+            let device = device.device().map_err(anyhow::Error::msg)?;
+            let features = Dinov3Features::from_file(weights, config, device)
+                .with_context(|| format!("loading DINOv3 from {}", weights.display()))?
+                .with_preprocess(Dinov3Preprocess {
+                    normalization,
+                    ..Dinov3Preprocess::default()
+                })?;
+            Ok(Dinov3Similarity { features })
+        }
     }
 
-    fn similarity(&self, left: &Image, left_hat: &Image, valid: &Mask) -> Result<f64> {
-        Ok(self.features.similarity(left, left_hat, valid)? as f64)
+    impl FeatureSimilarity for Dinov3Similarity {
+        fn name(&self) -> String {
+            let (weights, _) = self.features.weights();
+            let c = self.features.config();
+            let p = self.features.preprocess();
+            format!(
+                "dinov3 ({}, hidden {}, {} layers, {}x{} input, mean {:?} std {:?})",
+                weights.display(),
+                c.hidden_size,
+                c.num_hidden_layers,
+                p.width,
+                p.height,
+                p.normalization.mean,
+                p.normalization.std
+            )
+        }
+
+        fn similarity(&self, left: &Image, left_hat: &Image, valid: &Mask) -> Result<f64> {
+            Ok(self.features.similarity(left, left_hat, valid)? as f64)
+        }
     }
 }
 

@@ -19,18 +19,19 @@ mod report;
 mod runs;
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use dataset::subset::Subset;
 use matching::SgmParams;
 
-use crate::eval::{evaluate, EvalOptions, Method, Network, PairRecord, Table};
+use crate::eval::{evaluate, EvalOptions, Method, PairRecord, Table};
+use crate::matcher::{Matcher, MonsterOptions, Network};
 use crate::progress::Progress;
 use crate::world_training::{
     build_world_training, WorldMasks, WorldTrainingOptions, WorldTrainingSummary,
 };
+use nn::device::DeviceChoice;
 
 pub use heldout::{HeldOut, CROSS_SEASON, HELDOUT_SEED_OFFSET, SYNCHRONIC};
 pub use runs::{subset_name, RunPlan, RunResult};
@@ -175,19 +176,23 @@ pub fn run_ablation(opts: &AblationOptions, progress: &dyn Progress) -> Result<A
         lap(&format!("train {}", subset_name(subset)), &mut seconds);
     }
 
-    let classical = format!("{} teacher", Method::Sgm(opts.sgm.clone()).default_name());
-    let mut methods = vec![(classical.clone(), Method::Sgm(opts.sgm.clone()))];
+    let teacher = Matcher::Classical(opts.sgm.clone());
+    let classical = format!("{} teacher", teacher.name());
+    let mut methods = vec![(classical.clone(), Method::Matcher(teacher))];
     for run in &runs {
         let mut config = run.config.monster_config()?;
         config.iters = run.config.run.valid_iters;
-        let device = nn::infer::device_by_name("cpu").map_err(anyhow::Error::msg)?;
-        let predictor = nn::infer::MonsterPredictor::load(config, &run.weights, device)
-            .with_context(|| format!("loading {}", run.weights.display()))?;
-        let network = Network {
-            name: run.name.clone(),
-            predictor: Arc::new(predictor),
-        };
-        methods.push((run.name.clone(), Method::Network(network)));
+        let predictor = nn::infer::MonsterPredictor::load(
+            config,
+            &run.weights,
+            DeviceChoice::Cpu.device().map_err(anyhow::Error::msg)?,
+        )
+        .with_context(|| format!("loading {}", run.weights.display()))?;
+        let mut options = MonsterOptions::new(&run.weights, "tiny");
+        options.iters = Some(run.config.run.valid_iters);
+        options.device = DeviceChoice::Cpu;
+        let network = Network::new(options, predictor);
+        methods.push((run.name.clone(), Method::Matcher(Matcher::Network(network))));
     }
     let mut report = None;
     for (name, method) in methods {

@@ -17,8 +17,8 @@
 //!                                     _CLS.tif: ZERO = water (the release's convention)
 //! ```
 //!
-//! `<stem>` is `<LEFTID>-<RIGHTID>` (exactly one `-`); the pairs of a split are the `L/*.iio`
-//! files, sorted by stem. The AOI of a pair is the AOI of its left image ([`AoiRule`]).
+//! `<stem>` is `<LEFTID>-<RIGHTID>` ([`PairStem`], split at the first `-`); the pairs of a split are those of its
+//! [`PairFolder`] (`L/*.iio` or `.npy`), sorted by stem. The AOI of a pair is the AOI of its left image ([`AoiRule`]).
 //! Predictions given as files are looked up as `<PRED_DIR>/<SPLIT>/<stem>.<ext>` when the folder
 //! `<PRED_DIR>/<SPLIT>` exists, else `<PRED_DIR>/<stem>.<ext>`, with `<ext>` one of `iio`, `npy`,
 //! `tif`, `pfm`.
@@ -26,6 +26,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use dataset::PairStem;
+
+use crate::pairs::PairFolder;
 
 /// The benchmark's splits in Table 1's column order: (key, column title). A split named on the
 /// command line is matched to a key after lower-casing and mapping ` `/`-` to `_`, with the
@@ -101,14 +104,6 @@ impl AoiRule {
     }
 }
 
-/// Left and right image ids of a stem `<LEFTID>-<RIGHTID>`.
-pub fn split_stem(stem: &str) -> Result<(&str, &str)> {
-    match stem.split_once('-') {
-        Some((l, r)) if !l.is_empty() && !r.is_empty() && !r.contains('-') => Ok((l, r)),
-        _ => bail!("pair stem {stem:?} is not <LEFTID>-<RIGHTID> (exactly one '-')"),
-    }
-}
-
 /// A test split: its Table 1 name and its pair folder.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Split {
@@ -131,31 +126,11 @@ impl Split {
         })
     }
 
-    /// The stems of the split's pairs (`L/*.iio`), sorted.
+    /// The stems of the split's pairs, sorted.
     pub fn stems(&self) -> Result<Vec<String>> {
-        let l = self.dir.join("L");
-        let entries = std::fs::read_dir(&l).with_context(|| {
-            format!(
-                "split {:?}: cannot list the left images in {}",
-                self.name,
-                l.display()
-            )
-        })?;
-        let mut stems = Vec::new();
-        for e in entries {
-            let path = e
-                .with_context(|| format!("listing {}", l.display()))?
-                .path();
-            if path.extension().and_then(|e| e.to_str()) == Some("iio") {
-                if let Some(s) = path.file_stem().and_then(|s| s.to_str()) {
-                    if !s.starts_with('.') {
-                        stems.push(s.to_string());
-                    }
-                }
-            }
-        }
-        stems.sort();
-        Ok(stems)
+        PairFolder::new(&self.dir)
+            .stems()
+            .with_context(|| format!("split {:?}", self.name))
     }
 }
 
@@ -184,17 +159,18 @@ impl PairFiles {
         truth_dir: &Path,
         rule: &AoiRule,
     ) -> Result<Self> {
-        let (l, r) = split_stem(stem)?;
+        let ids = PairStem::parse(stem)?;
+        let (l, r) = (ids.left.id.as_str(), ids.right.id.as_str());
         let aoi = rule.aoi_of(l);
-        let file = |dir: &str, ext: &str| split_dir.join(dir).join(format!("{stem}.{ext}"));
+        let files = PairFolder::new(split_dir).pair(stem)?;
         Ok(PairFiles {
             stem: stem.to_string(),
             left_id: l.to_string(),
             right_id: r.to_string(),
-            left: file("L", "iio"),
-            right: file("R", "iio"),
-            homography: file("homography", "npz"),
-            gt_disparity: file("disparity", "iio"),
+            left: files.left,
+            right: files.right,
+            homography: files.homography,
+            gt_disparity: files.disparity,
             rpc_left: rpc_dir.join(format!("{l}.json")),
             rpc_right: rpc_dir.join(format!("{r}.json")),
             truth: TruthFiles::new(truth_dir, &aoi),
@@ -267,8 +243,6 @@ mod tests {
         assert_eq!(canonical_split("mine"), None);
         assert!(is_omaha_split("Omaha Diach.") && is_omaha_split("omaha_test"));
         assert!(!is_omaha_split("Jacksonville"));
-        assert_eq!(split_stem("A_1-B_2").unwrap(), ("A_1", "B_2"));
-        assert!(split_stem("A-B-C").is_err() && split_stem("AB").is_err());
         assert!(Split::parse("Jacksonville=/d").is_ok() && Split::parse("x").is_err());
     }
 }

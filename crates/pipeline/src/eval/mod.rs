@@ -3,7 +3,7 @@
 //!
 //! # The protocol, per pair
 //!
-//! 1. The disparity of the rectified pair: computed here (`Method::Sgm`, census + SGM over a range
+//! 1. The disparity of the rectified pair: computed here (`Method::Matcher`: census + MGM/SGM over a range
 //!    derived from the cameras and the scene's altitude range), read from a folder of predictions
 //!    (`Method::Predictions`), or the split's own ground-truth disparity (`Method::GroundTruth`,
 //!    a check of the chain itself).
@@ -60,11 +60,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use camera::{DsmGrid, DsmRaster, RpcModel, UtmZone};
-use matching::SgmParams;
 use raster::formats::{read_homographies, read_tiff};
 use raster::geometry::{crop, crop_homography};
 use raster::{Homography, Image};
 
+use crate::matcher::{Matcher, RangeSource};
 use crate::progress::{Progress, Silent};
 pub use aggregate::{aggregate, Table};
 pub use align::{align, AlignParams, Alignment, Scheme};
@@ -81,45 +81,25 @@ pub const TABLE_MD: &str = "table1.md";
 /// Where the disparities come from.
 #[derive(Clone, Debug)]
 pub enum Method {
-    /// Census + SGM on the (cropped) rectified pair, over a range from the cameras.
-    Sgm(SgmParams),
+    /// A matcher run on each (cropped) rectified pair; the classical one searches the range
+    /// the cameras give.
+    Matcher(Matcher),
     /// `<dir>/[<split>/]<stem>.{iio,npy,tif,pfm}` (see [`layout::prediction_path`]).
     Predictions(PathBuf),
     /// The split's ground-truth disparity `disparity/<stem>.iio`: measures the chain's own error.
     GroundTruth,
-    /// A stereo network run on each (cropped) rectified pair.
-    Network(Network),
-}
-
-/// A loaded stereo network (MonSter++) and its row name.
-#[derive(Clone)]
-pub struct Network {
-    /// Row name in Table 1, e.g. `MonSter++ (vitl)`.
-    pub name: String,
-    /// The network with its weights and inference options.
-    pub predictor: std::sync::Arc<nn::infer::MonsterPredictor>,
-}
-
-impl std::fmt::Debug for Network {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Network").field("name", &self.name).finish()
-    }
 }
 
 impl Method {
     /// The default row name of the method in Table 1.
     pub fn default_name(&self) -> String {
         match self {
-            Method::Sgm(p) => match p.aggregation {
-                matching::Aggregation::Mgm => "MGM (census)".to_string(),
-                matching::Aggregation::Sgm => "SGM (census)".to_string(),
-            },
+            Method::Matcher(m) => m.name(),
             Method::Predictions(dir) => dir
                 .file_name()
                 .map(|n| n.to_string_lossy().to_string())
                 .unwrap_or_else(|| "predictions".to_string()),
             Method::GroundTruth => "ground-truth disparity".to_string(),
-            Method::Network(n) => n.name.clone(),
         }
     }
 }
@@ -318,12 +298,6 @@ fn read_disparity(path: &Path, what: &str) -> Result<Image> {
         .channel(0))
 }
 
-/// The centre crop of a `(w, h)` rectified frame to at most `max` per side: `(x0, y0, cw, ch)`.
-pub fn centre_crop_window(w: usize, h: usize, max: usize) -> (usize, usize, usize, usize) {
-    let (cw, ch) = (w.min(max), h.min(max));
-    ((w - cw) / 2, (h - ch) / 2, cw, ch)
-}
-
 /// A disparity at the full rectified size `full` is cropped to the window; one already at the
 /// window's size is kept; any other size is an error naming `path`.
 fn fit_disparity(
@@ -487,7 +461,7 @@ fn evaluate_pair(
     let left_img = raster::read_image(&files.left)
         .with_context(|| format!("reading the left image {}", files.left.display()))?;
     let full = left_img.size();
-    let win = centre_crop_window(full.0, full.1, opts.crop);
+    let win = raster::geometry::centre_window(full.0, full.1, opts.crop, opts.crop);
     let (x0, y0, cw, ch) = win;
     let (hl, hr) = (
         crop_homography(&hl, x0 as f64, y0 as f64),
@@ -495,7 +469,7 @@ fn evaluate_pair(
     );
 
     let disparity = match &opts.method {
-        Method::Sgm(_) | Method::Network(_) => {
+        Method::Matcher(matcher) => {
             let right_img = raster::read_image(&files.right)
                 .with_context(|| format!("reading the right image {}", files.right.display()))?;
             if right_img.size() != full {
@@ -511,16 +485,10 @@ fn evaluate_pair(
             }
             let l = crop(&left_img, x0, y0, cw, ch)?;
             let r = crop(&right_img, x0, y0, cw, ch)?;
-            match &opts.method {
-                Method::Sgm(params) => {
-                    let range = camera_disparity_range(&rpc_left, &rpc_right, &hl, &hr, (cw, ch))?;
-                    crate::predict::predict_sgm(&l, &r, Some(range), params, &Silent)?.0
-                }
-                Method::Network(n) => {
-                    crate::predict::predict_monster(&n.predictor, &l, &r, &Silent)?
-                }
-                _ => unreachable!("matched above"),
-            }
+            let range = camera_disparity_range(&rpc_left, &rpc_right, &hl, &hr, (cw, ch))?;
+            matcher
+                .disparity(&l, &r, RangeSource::Given(range), &Silent)?
+                .disparity
         }
         Method::Predictions(dir) => {
             let path = layout::prediction_path(dir, &split.name, stem)?;

@@ -19,8 +19,7 @@
 //! (both need heights), and the record says so.
 
 use anyhow::{bail, Result};
-use nn::segformer::postprocess::class_mask;
-use nn::segformer::{MaskKind, MaskOptions, Segmentation};
+use dataset::segmentation::{class_mask, MaskKind, MaskOptions, Segmentation};
 use raster::Image;
 
 use super::heights::ImageHeights;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use camera::{read_dsm, UtmZone};
 use dataset::masks::{from_segmentation, MaskFile};
-use nn::segformer::MaskKind;
+use dataset::segmentation::MaskKind;
 use raster::{Image, Mask};
 
 use super::mask_path;

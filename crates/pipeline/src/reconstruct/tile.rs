@@ -4,13 +4,11 @@
 //! claiming the same pixels.
 
 use std::path::Path;
-use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use camera::rectify::{rectification, warp_nan, Rectification};
 use camera::{rasterize_window, triangulate_disparity, DsmGrid, GridWindow, Gridding, RpcModel};
-use matching::SgmParams;
 use raster::formats::{write_homographies, write_npy};
 use raster::{Homography, Image, Mask};
 use serde::{Deserialize, Serialize};
@@ -18,19 +16,11 @@ use serde::{Deserialize, Serialize};
 use super::plan::Tile;
 use super::raw::RawImage;
 use crate::dsm::valid_pixels;
-use crate::predict::{predict_monster, predict_sgm};
-use crate::rectify::{right_coverage, RectifyRecord};
-use crate::world_io::write_json;
+use crate::matcher::{Matcher, RangeSource};
+use crate::pairs::PairFolder;
+use crate::rectify::{right_coverage, RawInputs, RectifyRecord};
+use crate::stage::write_json;
 use crate::Silent;
-use nn::infer::MonsterPredictor;
-
-/// The matcher every tile uses.
-pub enum TileMatcher {
-    /// Census + MGM/SGM over each tile's range from the cameras.
-    Classical(SgmParams),
-    /// MonSter++, loaded once; tiles take turns.
-    Network(Box<Mutex<MonsterPredictor>>),
-}
 
 /// What every tile shares.
 pub struct Scene<'a> {
@@ -43,7 +33,7 @@ pub struct Scene<'a> {
     pub alt_range: (f64, f64),
     /// Where the altitude range came from.
     pub alt_source: &'a str,
-    pub matcher: &'a TileMatcher,
+    pub matcher: &'a Matcher,
     pub grid: &'a DsmGrid,
     pub gridding: Gridding,
     /// Pixels of each rectified disparity ignored at its borders.
@@ -131,14 +121,9 @@ pub fn tile_rectification(scene: &Scene, tile: &Tile) -> Result<Rectification> {
 /// Peak memory of a tile, bytes: the matcher's volumes ([`matching::memory_bytes`]; MonSter++
 /// is bounded by its own budget), both rectified images, the raw windows, the disparity, the
 /// points and the mask.
-pub fn tile_memory(rect: &Rectification, tile: &Tile, bands: usize, matcher: &TileMatcher) -> u64 {
+pub fn tile_memory(rect: &Rectification, tile: &Tile, bands: usize, matcher: &Matcher) -> u64 {
     let (w, h) = rect.size;
-    let (lo, hi) = rect.disparity_range;
-    let n = (hi - lo + 1).max(1) as usize;
-    let matching = match matcher {
-        TileMatcher::Classical(_) => matching::memory_bytes(w, h, n) as u64,
-        TileMatcher::Network(p) => p.lock().map(|p| p.memory_budget).unwrap_or(0),
-    };
+    let matching = matcher.memory_bytes(rect.size, rect.disparity_range);
     let px = (w * h) as u64;
     let raw = (tile.extended.width * tile.extended.height) as u64 * bands as u64 * 4 * 3;
     matching + px * (2 * 4 * bands as u64 + 4 + 24 + 1) + raw
@@ -218,17 +203,15 @@ fn match_and_grid(
         return Ok(None);
     };
 
-    let disparity = match scene.matcher {
-        TileMatcher::Classical(params) => {
-            predict_sgm(&left, &right, Some(rect.disparity_range), params, &Silent)?.0
-        }
-        TileMatcher::Network(p) => {
-            let p = p
-                .lock()
-                .map_err(|_| anyhow::anyhow!("the network failed on another tile"))?;
-            predict_monster(&p, &left, &right, &Silent)?
-        }
-    };
+    let disparity = scene
+        .matcher
+        .disparity(
+            &left,
+            &right,
+            RangeSource::Given(rect.disparity_range),
+            &Silent,
+        )?
+        .disparity;
     let finite = disparity.data().iter().filter(|v| v.is_finite()).count();
     record.matched = Some(finite as f64 / disparity.data().len().max(1) as f64);
     if let Some(dir) = scene.keep {
@@ -307,17 +290,13 @@ fn keep_files(
     disparity: &Image,
     rect: &Rectification,
 ) -> Result<()> {
-    let file = |sub: &str, ext: &str| dir.join(sub).join(format!("{name}.{ext}"));
-    let (l, r, h) = (
-        file("L", "iio"),
-        file("R", "iio"),
-        file("homography", "npz"),
-    );
-    write_npy(&l, left)?;
-    write_npy(&r, right)?;
-    write_npy(file("disparity", "iio"), disparity)?;
-    write_homographies(&h, &rect.h_left, &rect.h_right)?;
-    let record = RectifyRecord {
+    let folder = PairFolder::new(dir);
+    let files = folder.paths(name);
+    write_npy(&files.left, left)?;
+    write_npy(&files.right, right)?;
+    write_npy(&files.disparity, disparity)?;
+    write_homographies(&files.homography, &rect.h_left, &rect.h_right)?;
+    let raw = RawInputs {
         stem: name,
         left: scene.left.path(),
         right: scene.right.path(),
@@ -326,9 +305,8 @@ fn keep_files(
         roi: tile.extended,
         alt_range: scene.alt_range,
         alt_source: scene.alt_source,
-        right_coverage: right_coverage(right, rect),
-        files: [&l, &r, &h],
     };
-    write_json(&file("rectify", "json"), &record.to_json(rect))?;
+    let record = RectifyRecord::new(&raw, rect, right_coverage(right, rect), &files);
+    write_json(&folder.rectify_record_path(name), &record)?;
     Ok(())
 }

@@ -11,8 +11,9 @@ use world::WorldParams;
 
 use crate::demo::season_variant;
 use crate::eval::Split;
+use crate::pairs::PairFolder;
 use crate::progress::Progress;
-use crate::world_io::{image_ids, save_world, PairPaths};
+use crate::world_io::{image_ids, save_world};
 
 /// Held-out seeds start here above the ablation's seed (training worlds use `seed + k`,
 /// validation worlds `seed + 10000 + k`).
@@ -63,7 +64,7 @@ pub fn write_heldout(
         let generator = BuiltinSeasons::new(seed);
         let winter = season_variant(&generator, &left_id, &world.left, Season::Winter)?;
         let summer = season_variant(&generator, &right_id, &world.right, Season::Summer)?;
-        let out = PairPaths::new(&cross, &pair.stem);
+        let out = PairFolder::new(&cross).paths(&pair.stem);
         raster::write_image(&out.left, &winter)?;
         raster::write_image(&out.right, &summer)?;
         copy(&pair.homography, &out.homography)?;
@@ -72,7 +73,7 @@ pub fn write_heldout(
         progress.advance(k + 1);
     }
     progress.end();
-    let first = PairPaths::new(&cross, &worlds[0].1);
+    let first = PairFolder::new(&cross).paths(&worlds[0].1);
     Ok(HeldOut {
         splits: vec![
             Split {

@@ -7,8 +7,8 @@ use raster::{colormap, Image};
 
 use super::heldout::CROSS_SEASON;
 use super::{AblationOptions, AblationSummary, RunResult};
-use crate::demo::{describe_matcher, dsm_picture, metres, percent, thumbnail};
-use crate::eval::layout::{split_stem, AoiRule, TruthFiles};
+use crate::demo::{dsm_picture, metres, percent, thumbnail};
+use crate::eval::layout::{AoiRule, TruthFiles};
 use crate::eval::table::format_stat;
 use crate::eval::{saved_dsm_path, Table};
 use crate::report::Report;
@@ -262,8 +262,7 @@ fn write_pictures(opts: &AblationOptions, s: &AblationSummary) -> Result<Picture
         write_png(out.join(&path), &thumbnail(&image, 256)?, PngDepth::Eight)?;
         views.push((path, format!("held-out world {seed}: {caption}")));
     }
-    let (left_id, _) = split_stem(stem)?;
-    let aoi = AoiRule::default().aoi_of(left_id);
+    let aoi = AoiRule::default().aoi_of(&dataset::PairStem::parse(stem)?.left.id);
     let truth = camera::read_dsm(TruthFiles::new(&s.heldout.truth_dir, &aoi).dsm, None)?;
     let cell = truth.grid.resolution;
     let range = colormap::robust_range(&truth.image);
@@ -411,7 +410,7 @@ fn reading(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) {
 
 fn timings_and_commands(r: &mut Report, opts: &AblationOptions, s: &AblationSummary) -> Result<()> {
     r.heading("Classical matcher");
-    r.paragraph(&describe_matcher(&opts.sgm));
+    r.paragraph(&opts.sgm.describe());
     r.heading("Timings");
     let mut rows: Vec<Vec<String>> = s
         .seconds

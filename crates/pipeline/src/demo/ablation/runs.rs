@@ -90,7 +90,8 @@ impl RunPlan {
         let mut config = self.config(Subset::S1)?;
         config.model.init = None;
         // The CPU device training uses by default ([`TrainOptions::device`]).
-        let device = nn::infer::device_by_name("cpu")
+        let device = nn::device::DeviceChoice::Cpu
+            .device()
             .map_err(anyhow::Error::msg)?
             .autodiff();
         let (model, _) = train::setup::build_model(&config, &device, None)?;

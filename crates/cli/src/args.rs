@@ -1,0 +1,352 @@
+//! Arguments shared by several subcommands: the matcher (classical parameters, the network and
+//! its device), `--shard`, and the value parsers of ranges, regions and boxes.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use camera::rectify::Roi;
+use clap::builder::TypedValueParser;
+use clap::{Args, ValueEnum};
+use dataset::Shard;
+use matching::{Paths, SgmParams};
+use nn::device::DeviceChoice;
+use pipeline::matcher::{Matcher, MonsterOptions};
+use pipeline::stage::BatchSummary;
+
+/// The classical matcher: census costs aggregated by MGM or SGM, then the left-right check,
+/// uniqueness, median and speckle filters.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Method {
+    /// More Global Matching (Facciolo et al. 2015, as s2p): the default, best on real pairs.
+    Mgm,
+    /// Semi-Global Matching over 8 (or --four-paths 4) straight paths: faster.
+    Sgm,
+}
+
+impl Method {
+    pub fn aggregation(self) -> matching::Aggregation {
+        match self {
+            Method::Mgm => matching::Aggregation::Mgm,
+            Method::Sgm => matching::Aggregation::Sgm,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Model {
+    /// MonSter++ (accuracy model), weights from --weights.
+    Monsterpp,
+}
+
+/// How the points of one DSM cell become its height.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum GriddingArg {
+    /// Highest point per cell: the benchmark's protocol; one wrong point above a roof decides
+    /// the cell.
+    Max,
+    /// Median of the points per cell: robust to isolated wrong points.
+    Median,
+}
+
+impl From<GriddingArg> for camera::Gridding {
+    fn from(g: GriddingArg) -> Self {
+        match g {
+            GriddingArg::Max => camera::Gridding::Max,
+            GriddingArg::Median => camera::Gridding::Median,
+        }
+    }
+}
+
+/// The matcher of a stage: census + MGM/SGM, or MonSter++ with weights.
+#[derive(Args)]
+pub struct MatcherArgs {
+    /// Classical matching method (when no --model is given).
+    #[arg(long, value_enum, default_value_t = Method::Mgm)]
+    pub method: Method,
+    #[command(flatten)]
+    pub net: NetworkArgs,
+    #[command(flatten)]
+    pub sgm: SgmArgs,
+}
+
+impl MatcherArgs {
+    /// The matcher the flags choose (the network loaded).
+    pub fn matcher(&self) -> Result<Matcher> {
+        match self.net.network()? {
+            Some(network) => Ok(network),
+            None => Ok(Matcher::Classical(
+                self.sgm.params(self.method.aggregation())?,
+            )),
+        }
+    }
+}
+
+/// The stereo network options shared by `predict` and `eval`.
+#[derive(Args)]
+pub struct NetworkArgs {
+    /// Use a stereo network instead of the classical matcher.
+    #[arg(long, value_enum, requires = "weights")]
+    pub model: Option<Model>,
+    /// Network weights: an upstream MonSter++ .pth checkpoint or safetensors.
+    #[arg(long, value_name = "FILE", requires = "model")]
+    weights: Option<PathBuf>,
+    /// Network configuration matching the weights: vitl (released checkpoints), vitb, vits, tiny.
+    #[arg(long = "config", value_name = "PRESET", default_value = "vitl",
+          value_parser = ["vitl", "vitb", "vits", "tiny"])]
+    net_config: String,
+    /// Refinement iterations of the network (≥ 7). Default: 32 (8 for tiny).
+    #[arg(long, value_name = "N")]
+    iters: Option<usize>,
+    /// Maximum disparity of the network, a multiple of 32, pixels. Default: 416 (64 for tiny).
+    #[arg(long, value_name = "PX")]
+    max_disp: Option<usize>,
+    /// Input values for the network: as-is (0–255 data), percentile (2–98th percentile of each
+    /// image → 0–255, for uint16 imagery) or percentile:LO:HI.
+    #[arg(long, value_name = "MODE", default_value = "as-is",
+          value_parser = nn::infer::Normalisation::parse)]
+    normalise: nn::infer::Normalisation,
+    /// Peak memory of one network pass, GiB; larger pairs are cut into strips of rows.
+    #[arg(long, value_name = "GIB", default_value_t = 8.0)]
+    net_memory: f64,
+    /// Cut the pair into strips of ROWS rows for the network, whatever the memory budget.
+    #[arg(long, value_name = "ROWS")]
+    strip_rows: Option<usize>,
+    /// Overlap of consecutive strips, rows (blended linearly).
+    #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP)]
+    strip_overlap: usize,
+    #[command(flatten)]
+    pub device: DeviceArg,
+}
+
+impl NetworkArgs {
+    /// MonSter++ loaded from --weights, when --model is given.
+    pub fn network(&self) -> Result<Option<Matcher>> {
+        if self.model.is_none() {
+            return Ok(None);
+        }
+        let o = self.monster_options()?;
+        eprintln!(
+            "loading MonSter++ `{}` from {}",
+            o.preset,
+            o.weights.display()
+        );
+        Ok(Some(Matcher::Network(o.load()?)))
+    }
+
+    fn monster_options(&self) -> Result<MonsterOptions> {
+        let weights = self
+            .weights
+            .clone()
+            .context("--weights is required with --model")?;
+        if self.net_memory.is_nan() || self.net_memory <= 0.0 {
+            bail!("--net-memory must be positive (got {})", self.net_memory);
+        }
+        let mut o = MonsterOptions::new(weights, &self.net_config);
+        o.iters = self.iters;
+        o.max_disp = self.max_disp;
+        o.normalisation = self.normalise;
+        o.memory_budget = (self.net_memory * (1u64 << 30) as f64) as u64;
+        o.tile_rows = self.strip_rows;
+        o.tile_overlap = self.strip_overlap;
+        o.device = self.device.device;
+        Ok(o)
+    }
+}
+
+#[derive(Args)]
+pub struct SgmArgs {
+    /// SGM penalty of ±1 px disparity changes (census bits).
+    #[arg(long, default_value_t = SgmParams::default().p1)]
+    p1: u16,
+    /// SGM penalty of larger disparity jumps (census bits).
+    #[arg(long, default_value_t = SgmParams::default().p2)]
+    p2: u16,
+    /// Use 4 aggregation paths instead of 8 (faster, slightly less accurate).
+    #[arg(long)]
+    four_paths: bool,
+    /// Left-right consistency tolerance, pixels; 0 disables the check.
+    #[arg(long, default_value_t = SgmParams::default().lr_tolerance.unwrap_or(0.0))]
+    lr_tolerance: f32,
+    /// Gradient adaptation of P2 (jumps are cheaper across intensity edges; smaller = stronger);
+    /// 0 keeps P2 constant.
+    #[arg(long, value_name = "K", default_value_t = SgmParams::default().p2_adaptive.unwrap_or(0.0))]
+    p2_adaptive: f32,
+    /// Census window WxH (odd sides, at most 65 pixels).
+    #[arg(long, value_name = "WxH", value_parser = parse_census,
+          default_value_t = format_census(SgmParams::default().census))]
+    census: String,
+    /// Uniqueness ratio: the best cost must beat the best one more than 1 px away by this share;
+    /// 0 disables the test.
+    #[arg(long, value_name = "U", default_value_t = SgmParams::default().uniqueness.unwrap_or(0.0))]
+    uniqueness: f32,
+    /// Speckle filter: connected regions of disparity smaller than this many pixels are removed
+    /// (they survive the left-right check on real pairs and dominate a highest-point DSM); 0
+    /// keeps them.
+    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(0, |s| s.min_area))]
+    speckle: usize,
+    /// Largest disparity step between neighbours of one speckle region, pixels.
+    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(1.0, |s| s.max_diff))]
+    speckle_diff: f32,
+}
+
+fn format_census(c: matching::CensusWindow) -> String {
+    format!("{}x{}", c.width, c.height)
+}
+
+fn parse_census(s: &str) -> Result<String, String> {
+    census_window(s).map(|_| s.to_string())
+}
+
+fn census_window(s: &str) -> Result<matching::CensusWindow, String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WxH, e.g. 9x7, got {s:?}"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+    };
+    let c = matching::CensusWindow {
+        width: parse(w)?,
+        height: parse(h)?,
+    };
+    if !c.is_valid() {
+        return Err(format!(
+            "census window {s:?} needs odd sides and at most 65 pixels"
+        ));
+    }
+    Ok(c)
+}
+
+impl SgmArgs {
+    /// The classical matcher's parameters with `aggregation`.
+    pub fn params(&self, aggregation: matching::Aggregation) -> Result<SgmParams> {
+        let params = SgmParams {
+            p1: self.p1,
+            p2: self.p2,
+            aggregation,
+            paths: if self.four_paths {
+                Paths::Four
+            } else {
+                Paths::Eight
+            },
+            lr_tolerance: (self.lr_tolerance > 0.0).then_some(self.lr_tolerance),
+            p2_adaptive: (self.p2_adaptive > 0.0).then_some(self.p2_adaptive),
+            census: census_window(&self.census).map_err(anyhow::Error::msg)?,
+            uniqueness: (self.uniqueness > 0.0).then_some(self.uniqueness),
+            speckle: (self.speckle > 1).then_some(matching::Speckle {
+                min_area: self.speckle,
+                max_diff: self.speckle_diff,
+            }),
+            ..SgmParams::default()
+        };
+        params
+            .check()
+            .context("the classical matcher's flags (--p1, --p2, --census, --lr-tolerance, ...)")?;
+        Ok(params)
+    }
+}
+
+/// `MIN:MAX`, an inclusive disparity range in pixels.
+pub fn parse_range(s: &str) -> Result<(i32, i32), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("expected MIN:MAX, e.g. -10:54, got {s:?}"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<i32>()
+            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+    };
+    let (lo, hi) = (parse(a)?, parse(b)?);
+    if lo > hi {
+        return Err(format!("MIN must not exceed MAX in {s:?}"));
+    }
+    Ok((lo, hi))
+}
+
+/// `X,Y,W,H`, a region of a raw image in pixels.
+pub fn parse_roi(s: &str) -> Result<Roi, String> {
+    let v: Vec<usize> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<usize>()
+                .map_err(|e| format!("{t:?} in {s:?}: {e}"))
+        })
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, w, h] if w > 0 && h > 0 => Ok(Roi::new(x, y, w, h)),
+        _ => Err(format!(
+            "expected X,Y,W,H with W, H > 0, e.g. 150,150,700,700, got {s:?}"
+        )),
+    }
+}
+
+/// `MIN:MAX`, the scene's altitudes in metres.
+pub fn parse_alt_range(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("expected MIN:MAX in metres, e.g. -30:120, got {s:?}"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+    };
+    let (lo, hi) = (parse(a)?, parse(b)?);
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return Err(format!("MIN must be below MAX in {s:?}"));
+    }
+    Ok((lo, hi))
+}
+
+/// `--shard i/n`, shared by the stages.
+#[derive(Args)]
+pub struct ShardArg {
+    /// Process only shard I of N (0 ≤ I < N): the items at positions ≡ I mod N of the sorted
+    /// list, for array jobs (Slurm: --shard $SLURM_ARRAY_TASK_ID/$N; Kubernetes indexed jobs:
+    /// --shard $JOB_COMPLETION_INDEX/$N). Default: everything.
+    #[arg(long, value_name = "I/N", default_value = "0/1")]
+    pub shard: Shard,
+}
+
+/// `--device`, shared by the commands that run a network.
+#[derive(Args)]
+pub struct DeviceArg {
+    /// Where the network runs: auto (the best backend compiled in: cuda, then wgpu, then cpu),
+    /// cpu, wgpu or cuda (GPU backends need the build features `wgpu` / `cuda`).
+    #[arg(
+        id = "device",
+        long = "device",
+        value_name = "DEVICE",
+        default_value = "auto",
+        value_parser = clap::builder::PossibleValuesParser::new(DeviceChoice::NAMES)
+            .try_map(|s| s.parse::<DeviceChoice>())
+    )]
+    pub device: DeviceChoice,
+}
+
+/// The line every stage prints at its end.
+pub fn report(what: &str, s: &BatchSummary) {
+    println!(
+        "{what}: {} processed, {} already done (skipped), {} in this shard of {} items",
+        s.done, s.skipped, s.in_shard, s.total
+    );
+}
+
+/// `XMIN,YMIN,XMAX,YMAX` with MIN < MAX: UTM bounds here, lon/lat bounds for `reconstruct
+/// --roi-lonlat`; `names` spells the four values in the messages.
+pub fn parse_box(s: &str, names: &str) -> Result<[f64; 4], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .map_err(|e| format!("{p:?} in {s:?}: {e}"))
+        })
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [a, b, c, d] if a < c && b < d => Ok([a, b, c, d]),
+        [_, _, _, _] => Err(format!("{names} {s:?} must have each MIN < MAX")),
+        _ => Err(format!("expected {names}, got {s:?}")),
+    }
+}

@@ -1,0 +1,146 @@
+//! `seasonstereo eval`: the benchmark's altitude MAE over test splits (the paper's Table 1).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use matching::Aggregation;
+use pipeline::eval::{evaluate, AoiRule, EvalOptions, Method};
+use pipeline::matcher::Matcher;
+use pipeline::Progress;
+
+use crate::args::{NetworkArgs, SgmArgs};
+
+#[derive(Clone, Copy, ValueEnum)]
+enum EvalMethod {
+    /// Census + MGM on each (cropped) rectified pair, range from the cameras.
+    Mgm,
+    /// Census + SGM on each (cropped) rectified pair, range from the cameras.
+    Sgm,
+    /// The split's own disparity/<stem>.iio (LiDAR-derived): the error of the chain itself.
+    GroundTruth,
+}
+
+#[derive(Args)]
+#[command(
+    after_help = "Layout: SPLIT_DIR/{L,R}/<stem>.iio, SPLIT_DIR/homography/<stem>.npz, optional \
+    SPLIT_DIR/disparity/<stem>.iio; <stem> = <LEFTID>-<RIGHTID>; RPC_DIR/<IMAGEID>.json (SatNeRF/rpcm); \
+    TRUTH_DIR/<AOI>_DSM.tif, <AOI>_CLS.tif, optional <AOI>_WATER.png. Outputs: OUT/pairs.csv (one row \
+    per method, split and pair), OUT/table1.md, OUT/dsm/<method>/<split>/<stem>.tif with --save-dsm.\n\n\
+    Example: seasonstereo eval --split Jacksonville=test/jax --split \"Omaha Diach.\"=test/oma_dia \
+    --rpc-dir root_dir --truth-dir Track3-Truth --predictions preds/monster -o out/eval"
+)]
+pub struct EvalArgs {
+    /// A test split NAME=DIR (repeat). Table 1's names: Jacksonville, "Buenos Aires",
+    /// "Omaha Synch.", "Omaha Diach." (aliases jax, ba, omaha-sync, omaha-dia); other names get
+    /// columns of their own. Omaha splits drop pairs whose true disparity exceeds the limit.
+    #[arg(long = "split", value_name = "NAME=DIR", value_parser = pipeline::eval::Split::parse,
+          required_unless_present = "world")]
+    splits: Vec<pipeline::eval::Split>,
+    /// Evaluate a folder written by `seasonstereo world` (split "World", DIR/rpc, DIR/truth).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["splits", "rpc_dir", "truth_dir"])]
+    world: Option<PathBuf>,
+    /// Folder of the cameras <IMAGEID>.json (SatNeRF/rpcm JSON, the `root_dir`).
+    #[arg(long, value_name = "DIR", required_unless_present = "world")]
+    rpc_dir: Option<PathBuf>,
+    /// Folder of the ground truth <AOI>_DSM.tif (GeoTIFF, or the DFC2019 plain TIFF with its
+    /// <AOI>_DSM.txt georeference beside it: the UTM zone is taken from the pair's cameras),
+    /// <AOI>_CLS.tif, <AOI>_WATER.png.
+    #[arg(long, value_name = "DIR", required_unless_present = "world")]
+    truth_dir: Option<PathBuf>,
+    /// Compute the disparities with this method (or with --model)...
+    #[arg(long, value_enum, default_value_t = EvalMethod::Mgm)]
+    method: EvalMethod,
+    /// ...or read them from DIR/[<SPLIT>/]<stem>.{iio,npy,tif,pfm} (full rectified or crop size).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["method", "model"])]
+    predictions: Option<PathBuf>,
+    /// Row name of the method in the CSV and Table 1 (default: from the method or DIR).
+    #[arg(long)]
+    name: Option<String>,
+    /// Output folder.
+    #[arg(short, long, default_value = "out/eval")]
+    output: PathBuf,
+    /// Also write each predicted DSM as a GeoTIFF on the ground truth's grid.
+    #[arg(long)]
+    save_dsm: bool,
+    /// Evaluate at most the first N pairs (by stem) of each split.
+    #[arg(long, value_name = "N")]
+    max_pairs: Option<usize>,
+    /// AOI of an image id = its first N '_'-separated fields (JAX_068_001_RGB → JAX_068 with 2).
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
+    aoi_fields: u16,
+    /// Put every pair in this AOI instead (one ground-truth DSM for all).
+    #[arg(long, value_name = "AOI", conflicts_with = "aoi_fields")]
+    aoi: Option<String>,
+    /// Centre-crop rectified pairs larger than this, pixels.
+    #[arg(long, default_value_t = 1024)]
+    crop: usize,
+    /// Omaha pairs whose ground-truth disparity exceeds this are dropped, pixels.
+    #[arg(long, default_value_t = pipeline::eval::aggregate::OMAHA_MAX_DISPARITY)]
+    omaha_max_disparity: f64,
+    /// Scoring rules: `release` = the benchmark's released evaluator exactly (per-score
+    /// registration on the masked truth, its NCC pyramid, _WATER.png 0 = water, truth nodata not
+    /// masked); `robust` = one registration on the whole truth, NaN for the truth's nodata, a
+    /// centre-preferring NCC with a minimum overlap (rows named "<method> [robust]").
+    #[arg(long, value_name = "release|robust", default_value = "release",
+          value_parser = pipeline::eval::Protocol::parse)]
+    protocol: pipeline::eval::Protocol,
+    #[command(flatten)]
+    sgm: SgmArgs,
+    #[command(flatten)]
+    net: NetworkArgs,
+}
+
+impl EvalMethod {
+    /// The classical aggregation of `mgm`/`sgm`; `None` for the ground truth.
+    fn aggregation(self) -> Option<Aggregation> {
+        match self {
+            EvalMethod::Mgm => Some(Aggregation::Mgm),
+            EvalMethod::Sgm => Some(Aggregation::Sgm),
+            EvalMethod::GroundTruth => None,
+        }
+    }
+}
+
+pub fn run(a: EvalArgs, progress: &dyn Progress) -> Result<()> {
+    let method = match (&a.predictions, a.net.network()?, a.method.aggregation()) {
+        (Some(dir), _, _) => Method::Predictions(dir.clone()),
+        (None, Some(network), _) => Method::Matcher(network),
+        (None, None, Some(aggregation)) => {
+            Method::Matcher(Matcher::Classical(a.sgm.params(aggregation)?))
+        }
+        (None, None, None) => Method::GroundTruth,
+    };
+    let mut opts = match &a.world {
+        Some(dir) => EvalOptions::world(dir, "World", method, &a.output),
+        None => EvalOptions::new(
+            a.splits,
+            a.rpc_dir.context("--rpc-dir is required")?,
+            a.truth_dir.context("--truth-dir is required")?,
+            method,
+            &a.output,
+        ),
+    };
+    match a.name {
+        Some(n) => opts.method_name = n,
+        None if a.protocol != pipeline::eval::Protocol::Release => {
+            opts.method_name = format!("{} [{}]", opts.method_name, a.protocol.name());
+        }
+        None => {}
+    }
+    opts.protocol = a.protocol;
+    opts.save_dsm = a.save_dsm;
+    opts.max_pairs = a.max_pairs;
+    opts.aoi_rule = a
+        .aoi
+        .map_or(AoiRule::Fields(a.aoi_fields as usize), AoiRule::Fixed);
+    opts.crop = a.crop;
+    opts.omaha_max_disparity = a.omaha_max_disparity;
+    let r = evaluate(&opts, progress)?;
+    println!("{}", r.table.to_text());
+    println!(
+        "{} pairs scored, {} already scored (skipped), {} dropped (Omaha disparity > {}); per pair: {}; table: {}",
+        r.scored, r.skipped, r.dropped, opts.omaha_max_disparity, r.csv.display(), r.markdown.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,105 @@
+//! Where a network runs. The command line parses the user's word once into a [`DeviceChoice`];
+//! every stage that loads a network takes that typed choice and asks it for burn's device.
+
+use std::fmt;
+use std::str::FromStr;
+
+use burn::tensor::Device;
+
+/// The backend a network runs on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DeviceChoice {
+    /// The best backend compiled in: CUDA, then wgpu, then the CPU.
+    #[default]
+    Auto,
+    /// burn's pure-Rust CPU backend (`flex`).
+    Cpu,
+    /// wgpu (Vulkan, Metal, DX12); needs the `wgpu` build feature.
+    Wgpu,
+    /// CUDA; needs the `cuda` build feature.
+    Cuda,
+}
+
+impl DeviceChoice {
+    /// The words [`FromStr`] accepts, for help texts.
+    pub const NAMES: [&'static str; 4] = ["auto", "cpu", "wgpu", "cuda"];
+
+    /// The word of this choice.
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceChoice::Auto => "auto",
+            DeviceChoice::Cpu => "cpu",
+            DeviceChoice::Wgpu => "wgpu",
+            DeviceChoice::Cuda => "cuda",
+        }
+    }
+
+    /// burn's device, or why this build cannot give it.
+    pub fn device(self) -> Result<Device, String> {
+        match self {
+            DeviceChoice::Auto => Ok(default_device()),
+            DeviceChoice::Cpu => Ok(Device::flex()),
+            #[cfg(feature = "wgpu")]
+            DeviceChoice::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
+            #[cfg(not(feature = "wgpu"))]
+            DeviceChoice::Wgpu => Err(not_compiled_in("wgpu")),
+            #[cfg(feature = "cuda")]
+            DeviceChoice::Cuda => Ok(Device::cuda(0)),
+            #[cfg(not(feature = "cuda"))]
+            DeviceChoice::Cuda => Err(not_compiled_in("cuda")),
+        }
+    }
+}
+
+impl FromStr for DeviceChoice {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(DeviceChoice::Auto),
+            "cpu" | "flex" => Ok(DeviceChoice::Cpu),
+            "wgpu" => Ok(DeviceChoice::Wgpu),
+            "cuda" => Ok(DeviceChoice::Cuda),
+            other => Err(format!(
+                "unknown device {other:?} (expected auto, cpu, wgpu or cuda)"
+            )),
+        }
+    }
+}
+
+impl fmt::Display for DeviceChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Why a GPU backend named on the command line cannot be used, and how to get it.
+#[allow(dead_code)] // unused when both GPU features are compiled in
+fn not_compiled_in(backend: &str) -> String {
+    format!("the {backend} backend is not compiled in: rebuild with `--features {backend}`")
+}
+
+/// The best compiled device: CUDA, then wgpu, then the CPU.
+#[allow(unreachable_code)]
+pub fn default_device() -> Device {
+    #[cfg(feature = "cuda")]
+    return Device::cuda(0);
+    #[cfg(feature = "wgpu")]
+    return Device::wgpu(burn::tensor::DeviceKind::DefaultDevice);
+    Device::flex()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_round_trip_and_unknown_ones_are_refused() {
+        for name in DeviceChoice::NAMES {
+            assert_eq!(name.parse::<DeviceChoice>().unwrap().name(), name);
+        }
+        assert_eq!("flex".parse::<DeviceChoice>(), Ok(DeviceChoice::Cpu));
+        assert!("tpu".parse::<DeviceChoice>().unwrap_err().contains("tpu"));
+        assert!(DeviceChoice::Cpu.device().is_ok());
+    }
+}
