@@ -42,6 +42,7 @@ pub mod manifest;
 pub mod masks;
 pub mod rng;
 pub mod sample;
+pub mod scores;
 pub mod segmentation;
 pub mod shard;
 pub mod stem;

@@ -1,5 +1,6 @@
 //! Disparity scores against ground truth: the numbers of stereo benchmarks.
 
+use dataset::scores::count_errors;
 use raster::{Image, Mask, RasterError};
 use serde::Serialize;
 
@@ -32,36 +33,24 @@ pub fn score_disparity(
 ) -> Result<DisparityScores, RasterError> {
     predicted.check_same_size(truth, "predicted and true disparity")?;
     truth.check_mask(region, "true disparity and evaluation mask")?;
-    let (mut evaluated, mut matched, mut abs_sum, mut sq_sum, mut bad1, mut bad2) =
-        (0usize, 0usize, 0.0f64, 0.0f64, 0usize, 0usize);
-    let px = predicted.channels();
-    let tx = truth.channels();
-    for (i, &keep) in region.data().iter().enumerate() {
-        let t = truth.data()[i * tx];
-        if !keep || !t.is_finite() {
-            continue;
-        }
-        evaluated += 1;
-        let p = predicted.data()[i * px];
-        if !p.is_finite() {
-            continue;
-        }
-        matched += 1;
-        let e = (p - t).abs() as f64;
-        abs_sum += e;
-        sq_sum += e * e;
-        bad1 += (e > 1.0) as usize;
-        bad2 += (e > 2.0) as usize;
-    }
-    let per = |v: f64, n: usize| (n > 0).then(|| v / n as f64);
+    let (px, tx) = (predicted.channels(), truth.channels());
+    let c = count_errors(
+        region
+            .data()
+            .iter()
+            .enumerate()
+            .filter(|(_, &keep)| keep)
+            .map(|(i, _)| (predicted.data()[i * px], truth.data()[i * tx])),
+    );
+    let per = |v: f64| (c.matched > 0).then(|| v / c.matched as f64);
     Ok(DisparityScores {
-        evaluated,
-        matched,
-        coverage: per(matched as f64, evaluated),
-        mae: per(abs_sum, matched),
-        rmse: per(sq_sum, matched).map(f64::sqrt),
-        bad1: per(bad1 as f64, matched),
-        bad2: per(bad2 as f64, matched),
+        evaluated: c.evaluated,
+        matched: c.matched,
+        coverage: (c.evaluated > 0).then(|| c.matched as f64 / c.evaluated as f64),
+        mae: c.mae(),
+        rmse: per(c.sq_sum).map(f64::sqrt),
+        bad1: per(c.over[0] as f64),
+        bad2: per(c.over[1] as f64),
     })
 }
 

@@ -325,7 +325,7 @@ pub fn reconstruct(
         let memory: Vec<u64> = todo
             .iter()
             .zip(&rects)
-            .map(|(t, r)| r.as_ref().map_or(0, |r| tile_memory(r, t, bands, &matcher)))
+            .map(|(t, r)| r.as_ref().map_or(0, |r| tile_memory(r, t, bands, matcher)))
             .collect();
         largest = memory.iter().copied().max().unwrap_or(0);
         if !todo.is_empty() && largest + base > opts.max_memory {

@@ -10,6 +10,8 @@ use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use dataset::scores::count_errors;
+
 use crate::events::EventWriter;
 use crate::trainer::{StepRecord, ValidationRecord};
 use crate::TrainError;
@@ -172,37 +174,19 @@ pub struct ValidationAccumulator {
 
 /// One pair's (EPE, bad-1, bad-3) over `valid`, or `None` when no pixel is valid.
 pub fn pair_scores(prediction: &[f32], truth: &[f32], valid: &[bool]) -> Option<[f64; 3]> {
-    let (mut n, mut n_finite) = (0usize, 0usize);
-    let mut sums = [0f64; 3];
-    for ((&p, &t), &v) in prediction.iter().zip(truth).zip(valid) {
-        if !(v && t.is_finite()) {
-            continue;
-        }
-        n += 1;
-        // A non-finite prediction counts as bad at every threshold; the EPE averages the finite
-        // ones (it would otherwise be NaN).
-        if !p.is_finite() {
-            sums[1] += 1.0;
-            sums[2] += 1.0;
-            continue;
-        }
-        let e = (p - t).abs() as f64;
-        n_finite += 1;
-        sums[0] += e;
-        sums[1] += (e > 1.0) as u8 as f64;
-        sums[2] += (e > 3.0) as u8 as f64;
-    }
-    (n > 0).then(|| {
-        [
-            if n_finite > 0 {
-                sums[0] / n_finite as f64
-            } else {
-                f64::NAN
-            },
-            sums[1] / n as f64,
-            sums[2] / n as f64,
-        ]
-    })
+    let c = count_errors(
+        prediction
+            .iter()
+            .zip(truth)
+            .zip(valid)
+            .filter(|(_, &v)| v)
+            .map(|((&p, &t), _)| (p, t)),
+    );
+    // A non-finite prediction counts as bad at every threshold; the EPE averages the finite
+    // ones (it would otherwise be NaN).
+    let n = c.evaluated as f64;
+    let bad = |k: usize| (c.over[k] + c.unmatched()) as f64 / n;
+    (c.evaluated > 0).then(|| [c.mae().unwrap_or(f64::NAN), bad(0), bad(2)])
 }
 
 impl ValidationAccumulator {
