@@ -7,6 +7,8 @@
 #
 # rectify + teacher (the default SGM) on the 12 dev pairs give the heights; then `masks` with the
 # rules (with heights, and colour only) and with the previous pixel classifier; one table each.
+# Last, the registration check: each pair's DSM on the truth grid (`dsm --like`), and the rules'
+# masks scored again with the truth moved by the benchmark's shift of those DSMs (--register).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-out/jax-dev-masks}
@@ -33,3 +35,13 @@ run() { # name, masks flags...
 run rules-heights --pairs "$OUT/pairs" --disparities "$OUT/teacher"
 run rules-colour
 run pixel-classifier --segmenter pixel-classifier
+mkdir -p "$OUT/dsm"
+for f in "$OUT"/pairs/rectify/*.json; do
+  s=$(basename "$f" .json); l=${s%-JAX*}; r=${s#*RGB-}
+  [ -f "$OUT/dsm/$s.tif" ] || "$BIN" dsm "$OUT/teacher/$s.iio" --homography "$OUT/pairs/homography/$s.npz" \
+    --rpc-left "$D/rpcs/ba/$l.json" --rpc-right "$D/rpcs/ba/$r.json" --like "$D/truth/JAX_068_DSM.tif" \
+    -o "$OUT/dsm/$s.tif" > /dev/null
+done
+printf '\n### rules-heights, truth registered by the pairs DSMs\n'
+"$BIN" masks-score --masks "$OUT/rules-heights" --rpc-dir "$D/rpcs/ba" --truth "$D/truth/JAX_068_DSM.tif" \
+  --register "$OUT"/dsm/*.tif

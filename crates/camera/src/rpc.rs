@@ -145,6 +145,36 @@ fn json_error(origin: &str, key: &str, message: impl Into<String>) -> CameraErro
 }
 
 impl RpcModel {
+    /// An affine nadir camera: normalised column = normalised longitude, row = − normalised
+    /// latitude, no altitude term. `offsets` and `scales` are `[row, col, lat, lon, alt]` as in
+    /// the RPC00B tags. Synthetic scenes and tests start from it and add terms.
+    pub fn nadir(offsets: [f64; 5], scales: [f64; 5]) -> Self {
+        let (mut col_num, mut row_num, mut den) = ([0.0; 20], [0.0; 20], [0.0; 20]);
+        col_num[1] = 1.0;
+        row_num[2] = -1.0;
+        den[0] = 1.0;
+        let [row_offset, col_offset, lat_offset, lon_offset, alt_offset] = offsets;
+        let [row_scale, col_scale, lat_scale, lon_scale, alt_scale] = scales;
+        RpcModel {
+            row_offset,
+            col_offset,
+            lat_offset,
+            lon_offset,
+            alt_offset,
+            row_scale,
+            col_scale,
+            lat_scale,
+            lon_scale,
+            alt_scale,
+            row_num,
+            row_den: den,
+            col_num,
+            col_den: den,
+            min_alt: None,
+            max_alt: None,
+        }
+    }
+
     /// From rpcm's dictionary, either a whole SatNeRF image JSON (the model under `"rpc"`, the
     /// altitude bounds in `min_alt`/`max_alt`) or the bare `rpc` dictionary.
     pub fn from_rpcm_json(value: &Value) -> Result<Self> {
@@ -504,35 +534,17 @@ mod tests {
 
     /// A mildly non-linear synthetic camera.
     fn camera() -> RpcModel {
-        let mut col_num = [0.0; 20];
-        let mut row_num = [0.0; 20];
-        let mut den = [0.0; 20];
-        col_num[1] = 1.0;
-        col_num[3] = 0.05;
-        col_num[7] = 0.01;
-        row_num[2] = -1.0;
-        row_num[1] = 0.02;
-        row_num[8] = 0.005;
-        den[0] = 1.0;
-        den[3] = 0.001;
-        RpcModel {
-            row_offset: 500.0,
-            col_offset: 500.0,
-            lat_offset: 30.0,
-            lon_offset: -81.0,
-            alt_offset: 0.0,
-            row_scale: 500.0,
-            col_scale: 500.0,
-            lat_scale: 0.01,
-            lon_scale: 0.01,
-            alt_scale: 100.0,
-            row_num,
-            row_den: den,
-            col_num,
-            col_den: den,
-            min_alt: None,
-            max_alt: None,
-        }
+        let mut c = RpcModel::nadir(
+            [500.0, 500.0, 30.0, -81.0, 0.0],
+            [500.0, 500.0, 0.01, 0.01, 100.0],
+        );
+        c.col_num[3] = 0.05;
+        c.col_num[7] = 0.01;
+        c.row_num[1] = 0.02;
+        c.row_num[8] = 0.005;
+        c.row_den[3] = 0.001;
+        c.col_den[3] = 0.001;
+        c
     }
 
     #[test]

@@ -265,9 +265,10 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
         "rules on unseen worlds, exact heights: IoU tree {:.3} building {:.3} water {:.3}",
         iou[0], iou[1], iou[2]
     );
-    // Measured 0.57 / 0.65 / 0.44 (the pixel classifier trained on such worlds: 0.73 / 0.34 /
-    // 0.93): heights make the buildings; the world's water is brighter and noisier than most.
+    // Measured 0.57 / 0.65 / 0.83 (the pixel classifier trained on such worlds: 0.73 / 0.34 /
+    // 0.93): heights make the buildings; the world's water is blue but brighter and noisier
+    // than the dark-and-smooth rule wants (0.44 without the blue rule).
     assert!(iou[0] >= 0.5, "tree IoU {}", iou[0]);
     assert!(iou[1] >= 0.55, "building IoU {}", iou[1]);
-    assert!(iou[2] >= 0.35, "water IoU {}", iou[2]);
+    assert!(iou[2] >= 0.75, "water IoU {}", iou[2]);
 }

@@ -10,7 +10,9 @@ use matching::SgmParams;
 use pipeline::dataset_build::rectify_mask;
 use pipeline::dsm::GridChoice;
 use pipeline::masks::heights::PairIndex;
-use pipeline::masks::score::{read_masks, score_folder, score_masks, ClassTruth, ImageScore};
+use pipeline::masks::score::{
+    read_masks, registration, score_folder, score_masks, ClassTruth, ImageScore,
+};
 use pipeline::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter};
 use pipeline::matcher::Matcher;
 use pipeline::reconstruct::{reconstruct, ReconstructOptions};
@@ -30,7 +32,15 @@ fn masks_of(images: &Path, out: &Path, segmenter: Box<dyn ImageSegmenter>) -> Ve
         &Silent,
     )
     .unwrap();
-    score_folder(out, &jax("rpcs/ba"), &jax("truth/JAX_068_DSM.tif"), None).unwrap()
+    score_folder(
+        out,
+        &jax("rpcs/ba"),
+        &jax("truth/JAX_068_DSM.tif"),
+        None,
+        &[out.join("../dsm.tif")],
+    )
+    .unwrap()
+    .scores
 }
 
 #[test]
@@ -113,7 +123,8 @@ fn rules_with_heights_find_the_trees_and_buildings_of_014_015() {
     let rpc = pipeline::dsm::read_camera(&jax("rpcs/ba/JAX_068_014_RGB.json")).unwrap();
     let zone = camera::UtmZone::from_lonlat(rpc.lon_offset, rpc.lat_offset);
     let truth = ClassTruth::read(&jax("truth/JAX_068_DSM.tif"), None, zone).unwrap();
-    let projected = truth.classes_in_image(&rpc, tree.size());
+    let (shift, _) = registration(&truth, &[dir.path().join("dsm.tif")]).unwrap();
+    let projected = truth.classes_in_image(&rpc, tree.size(), shift);
     let (h_left, _) = raster::formats::read_homographies(
         pairs.join("homography/JAX_068_014_RGB-JAX_068_015_RGB.npz"),
     )

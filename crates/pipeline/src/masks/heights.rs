@@ -8,17 +8,19 @@
 //! the canopy, and a filled hole there says "ground" when it does not know) and `filled` (after
 //! hole filling and a 7×7 median: complete roofs for the building rule).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 use anyhow::{bail, Context, Result};
 use camera::{fill_holes, median_filter, rasterize, triangulate_disparity, DsmGrid, Gridding};
 use camera::{Points, RpcModel, UtmZone};
 use raster::Image;
-use serde_json::Value;
 
 use super::project::render_into_image;
 use crate::dsm::{read_camera, valid_pixels};
+use crate::rectify::{RectifiedFiles, RectifyRecord};
+use crate::stage::read_json;
 
 /// Cell size of the heights grid, metres.
 const RESOLUTION: f64 = 0.5;
@@ -52,6 +54,24 @@ pub struct PairIndex {
     by_image: BTreeMap<String, Vec<StereoPair>>,
     /// Pairs whose disparity is missing (not matched yet).
     pub without_disparity: Vec<String>,
+    /// Every pair's points are triangulated once and shared by its two images.
+    cache: PointCache,
+}
+
+/// Finite points (lon, lat, alt) of a pair.
+type PairPoints = Arc<Vec<[f64; 3]>>;
+
+/// Triangulated pairs by stem, with the number of their images still to ask for them: a pair is
+/// dropped when its second image has taken it (at most every pair's points held at once, in the
+/// worst order; in `masks`' sorted order a few).
+#[derive(Clone, Default)]
+struct PointCache(Arc<Mutex<HashMap<String, (usize, PairPoints)>>>);
+
+impl std::fmt::Debug for PointCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let held = self.0.lock().map(|m| m.len()).unwrap_or(0);
+        write!(f, "PointCache({held} pairs held)")
+    }
 }
 
 fn stem_of(path: &Path) -> String {
@@ -80,30 +100,25 @@ impl PairIndex {
         files.sort();
         let mut index = PairIndex::default();
         for file in files {
-            let text = std::fs::read_to_string(&file)
-                .with_context(|| format!("reading {}", file.display()))?;
-            let v: Value = serde_json::from_str(&text)
-                .with_context(|| format!("{} is not valid JSON", file.display()))?;
-            let field = |k: &str| v[k].as_str().map(PathBuf::from);
-            let (Some(stem), Some(left), Some(right), Some(homography)) = (
-                v["stem"].as_str().map(str::to_string),
-                field("left"),
-                field("right"),
-                v["files"]["homography"].as_str().map(PathBuf::from),
-            ) else {
-                bail!(
-                    "{}: not a rectify record (stem, left, right, files.homography); rerun `seasonstereo rectify`",
-                    file.display()
-                );
-            };
+            let record: RectifyRecord = read_json(&file)?
+                .with_context(|| format!("{} vanished while listing", file.display()))?;
+            let RectifyRecord {
+                stem,
+                left,
+                right,
+                rpc_left,
+                rpc_right,
+                files: RectifiedFiles { homography, .. },
+                ..
+            } = record;
             let disparity = disparities.join(format!("{stem}.iio"));
             if !disparity.is_file() {
                 index.without_disparity.push(stem);
                 continue;
             }
             let pair = StereoPair {
-                rpc_left: field("rpc_left").unwrap_or_else(|| left.clone()),
-                rpc_right: field("rpc_right").unwrap_or_else(|| right.clone()),
+                rpc_left: rpc_left.unwrap_or_else(|| left.clone()),
+                rpc_right: rpc_right.unwrap_or_else(|| right.clone()),
                 stem,
                 left,
                 right,
@@ -124,6 +139,35 @@ impl PairIndex {
     /// The pairs image `stem` belongs to.
     pub fn pairs_of(&self, stem: &str) -> &[StereoPair] {
         self.by_image.get(stem).map_or(&[], Vec::as_slice)
+    }
+
+    /// The finite points of `pair`, triangulated on the first call and kept for the pair's other
+    /// image (dropped after its second call).
+    pub fn points(&self, pair: &StereoPair) -> Result<PairPoints> {
+        let mut cache = self.cache_lock();
+        if let Some((left, points)) = cache.get_mut(&pair.stem) {
+            let points = points.clone();
+            *left -= 1;
+            if *left == 0 {
+                cache.remove(&pair.stem);
+            }
+            return Ok(points);
+        }
+        drop(cache);
+        let points: PairPoints = Arc::new(
+            triangulate(pair)?
+                .lonlatalt
+                .into_iter()
+                .filter(|p| p[2].is_finite())
+                .collect(),
+        );
+        self.cache_lock()
+            .insert(pair.stem.clone(), (1, points.clone()));
+        Ok(points)
+    }
+
+    fn cache_lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, (usize, PairPoints)>> {
+        self.cache.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Number of pairs with a disparity.
@@ -285,8 +329,7 @@ pub fn image_heights(
     let rpc = read_camera(camera_file)?;
     let mut all = Vec::new();
     for pair in pairs {
-        let points = triangulate(pair)?;
-        all.extend(points.lonlatalt.into_iter().filter(|p| p[2].is_finite()));
+        all.extend_from_slice(&index.points(pair)?);
     }
     if all.is_empty() {
         bail!("{stem}: its pairs' disparities triangulate to no point (all NaN?)");

@@ -9,9 +9,12 @@
 //!   ground-first, so it cannot tell); a missed tree costs the training loss more than a masked
 //!   lawn;
 //! - building = filled height > 2.5 m ∧ not vegetation;
-//! - water (decided first: water can be green) = dark ∧ smooth ∧ low: mean brightness 15×15 <
-//!   0.16, local std 15×15 < 0.03, filled height < 1 m, in components the release's clean-up
-//!   keeps (none on the JAX_068 images, which have no water; IoU 0.44 on the procedural world);
+//! - water (decided first: water can be green) = low ∧ (dark ∧ smooth, or blue): filled height
+//!   < 1 m and either mean brightness 15×15 < 0.16 with local std 15×15 < 0.03, or the 7×7 mean
+//!   of the blue chroma `(B − R)/(R + G + B)` > 0.25 with mean brightness < 0.3 (clear water
+//!   is blue; shadows on WorldView-3 are bluish too, but stay below 0.25 on 99.9 % of the
+//!   JAX_068 pixels, winter 006 included), in components the release's clean-up keeps (none on
+//!   the JAX_068 images, which have no water; see BENCHMARKS.md for the procedural world);
 //! - classes (OpenEarthMap ids): 5 tree, 8 building, 6 water, 2 rangeland (vegetation at ground
 //!   level), 3 developed (the rest).
 //!
@@ -36,6 +39,9 @@ pub const BUILDING_HEIGHT_M: f32 = 2.5;
 const WATER_BRIGHTNESS: f64 = 0.16;
 const WATER_STD: f64 = 0.03;
 const WATER_HEIGHT_M: f32 = 1.0;
+/// Blue water: 7×7 mean blue chroma above this, mean brightness below the second.
+const WATER_BLUE: f64 = 0.25;
+const WATER_BLUE_BRIGHTNESS: f64 = 0.3;
 
 /// OpenEarthMap ids of the class map.
 const RANGELAND: usize = 2;
@@ -51,6 +57,7 @@ pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
     let n = w * h;
     let mut exg = Vec::with_capacity(n);
     let mut v = Vec::with_capacity(n);
+    let mut blue = Vec::with_capacity(n);
     for p in image.data().chunks_exact(c) {
         let at = |i: usize| (p[i.min(c - 1)] as f64 / 255.0).clamp(0.0, 1.0);
         let (r, g, b) = if c >= 3 {
@@ -60,6 +67,7 @@ pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
         };
         exg.push((2.0 * g - r - b) / (r + g + b + 1e-3));
         v.push((r + g + b) / 3.0);
+        blue.push((b - r) / (r + g + b + 1e-3));
     }
     let exg = box_mean(&exg, w, h, 3);
     let (mean, spread) = match heights {
@@ -76,6 +84,10 @@ pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
         }
         None => (Vec::new(), Vec::new()),
     };
+    let blue = match heights {
+        Some(_) => box_mean(&blue, w, h, 3),
+        None => Vec::new(),
+    };
     (0..n)
         .map(|i| {
             let vegetation = exg[i] > VEGETATION_EXG;
@@ -86,7 +98,9 @@ pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
             let filled = hg.filled.data()[i];
             // Unknown heights (NaN) do not rule water out; green water is still water.
             let low = filled.is_nan() || filled < WATER_HEIGHT_M;
-            if mean[i] < WATER_BRIGHTNESS && spread[i] < WATER_STD && low {
+            let dark_smooth = mean[i] < WATER_BRIGHTNESS && spread[i] < WATER_STD;
+            let blue_water = blue[i] > WATER_BLUE && mean[i] < WATER_BLUE_BRIGHTNESS;
+            if low && (dark_smooth || blue_water) {
                 WATER
             } else if vegetation {
                 let raised = !measured.is_finite() || measured > TREE_HEIGHT_M;

@@ -3,6 +3,13 @@
 //! each image through the truth DSM and the image's RPC ([`super::project`], the highest LiDAR
 //! cell per pixel) and compared with the masks pixel by pixel where the truth is 2, 5 or 6.
 //! Tree = class 5, building = class 6, ground = class 2 against "neither mask".
+//!
+//! Registration: the cameras' frame and the truth grid may be offset by a few cells (the
+//! benchmark registers every DSM to the truth by an integer shift before scoring it). Given DSMs
+//! triangulated through the same cameras on the truth grid (`reconstruct --like <truth>`),
+//! [`registration`] finds the benchmark's shift of each ([`crate::eval::align`], the released
+//! evaluator's multiscale NCC, ±5 cells) and the truth is moved by the median shift into the
+//! cameras' frame before it is projected ([`Shift`]).
 
 use std::path::{Path, PathBuf};
 
@@ -15,6 +22,24 @@ use raster::{Image, Mask};
 use super::mask_path;
 use super::project::render_into_image;
 use crate::dsm::read_camera;
+use crate::eval::{align, AlignParams, Alignment};
+
+/// The benchmark's registration of the cameras' frame to the truth grid, cells: a DSM `pred`
+/// triangulated through the cameras matches the truth as `pred(x − dx, y − dy) ≈ truth(x, y)`
+/// ([`crate::eval::align`]'s convention), so truth cell `(c, r)` is seen where the cameras put
+/// cell `(c − dx, r − dy)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Shift {
+    pub dx: i32,
+    pub dy: i32,
+}
+
+/// One registration DSM's shift.
+#[derive(Clone, Debug)]
+pub struct Registered {
+    pub dsm: PathBuf,
+    pub alignment: Alignment,
+}
 
 /// LAS codes of the DFC2019 classes scored.
 pub const GROUND: u8 = 2;
@@ -102,10 +127,56 @@ impl ClassTruth {
         })
     }
 
-    /// The truth class seen at every pixel of a `size` image of camera `rpc` (NaN: none).
-    pub fn classes_in_image(&self, rpc: &camera::RpcModel, size: (usize, usize)) -> Image {
-        render_into_image(&self.dsm, &[&self.classes], &self.grid, rpc, size)
+    /// The truth class seen at every pixel of a `size` image of camera `rpc` (NaN: none), the
+    /// truth moved by `shift` into the cameras' frame.
+    pub fn classes_in_image(
+        &self,
+        rpc: &camera::RpcModel,
+        size: (usize, usize),
+        shift: Shift,
+    ) -> Image {
+        let mut grid = self.grid.clone();
+        grid.x0 -= shift.dx as f64 * grid.resolution;
+        grid.y0 += shift.dy as f64 * grid.resolution;
+        render_into_image(&self.dsm, &[&self.classes], &grid, rpc, size)
     }
+
+    /// The benchmark's shift of a DSM on the truth grid (the released evaluator's NCC search).
+    pub fn register(&self, dsm: &Path) -> Result<Alignment> {
+        let pred = read_dsm(dsm, Some(self.grid.zone()))
+            .with_context(|| format!("reading the registration DSM {}", dsm.display()))?;
+        if pred.grid != self.grid {
+            bail!(
+                "{}: not on the truth grid; build it with `reconstruct --like <truth DSM>`",
+                dsm.display()
+            );
+        }
+        align(&self.dsm, &pred.image, &AlignParams::default())
+            .with_context(|| format!("{}: no cell shared with the truth", dsm.display()))
+    }
+}
+
+/// The shifts of `dsms` and their median (per axis; `(0, 0)` without DSMs).
+pub fn registration(truth: &ClassTruth, dsms: &[PathBuf]) -> Result<(Shift, Vec<Registered>)> {
+    let mut found = Vec::new();
+    for dsm in dsms {
+        found.push(Registered {
+            dsm: dsm.clone(),
+            alignment: truth.register(dsm)?,
+        });
+    }
+    let median = |f: fn(&Alignment) -> i32| -> i32 {
+        let mut v: Vec<i32> = found.iter().map(|r| f(&r.alignment)).collect();
+        v.sort_unstable();
+        v.get(v.len() / 2).copied().unwrap_or(0)
+    };
+    Ok((
+        Shift {
+            dx: median(|a| a.dx),
+            dy: median(|a| a.dy),
+        },
+        found,
+    ))
 }
 
 /// Scores a tree mask and a building mask (true = the class) against projected truth classes.
@@ -190,13 +261,23 @@ pub fn mask_stems(masks_dir: &Path) -> Result<Vec<String>> {
     Ok(stems)
 }
 
-/// Scores every image of a `masks` folder whose camera `<rpc_dir>/<stem>.json` exists.
+/// The scores of a folder and the registration they used.
+#[derive(Clone, Debug)]
+pub struct FolderScore {
+    pub scores: Vec<ImageScore>,
+    pub shift: Shift,
+    pub registered: Vec<Registered>,
+}
+
+/// Scores every image of a `masks` folder whose camera `<rpc_dir>/<stem>.json` exists, the truth
+/// registered by `register` (DSMs through the same cameras on the truth grid; none: no shift).
 pub fn score_folder(
     masks_dir: &Path,
     rpc_dir: &Path,
     truth_dsm: &Path,
     classes: Option<&Path>,
-) -> Result<Vec<ImageScore>> {
+    register: &[PathBuf],
+) -> Result<FolderScore> {
     let stems = mask_stems(masks_dir)?;
     let camera = |stem: &str| -> PathBuf { rpc_dir.join(format!("{stem}.json")) };
     let with_camera: Vec<&String> = stems.iter().filter(|s| camera(s).is_file()).collect();
@@ -214,14 +295,19 @@ pub fn score_folder(
         classes,
         UtmZone::from_lonlat(rpc0.lon_offset, rpc0.lat_offset),
     )?;
-    let mut out = Vec::new();
+    let (shift, registered) = registration(&truth, register)?;
+    let mut scores = Vec::new();
     for stem in with_camera {
         let rpc = read_camera(&camera(stem))?;
         let [tree, building, water] = read_masks(masks_dir, stem)?;
-        let projected = truth.classes_in_image(&rpc, tree.size());
-        out.push(score_masks(stem, &projected, &tree, &building, &water));
+        let projected = truth.classes_in_image(&rpc, tree.size(), shift);
+        scores.push(score_masks(stem, &projected, &tree, &building, &water));
     }
-    Ok(out)
+    Ok(FolderScore {
+        scores,
+        shift,
+        registered,
+    })
 }
 
 /// The table of [`score_folder`]: one row per image, then the mean over images and the pooled
