@@ -402,6 +402,27 @@ fn sweep_chunk_impl(ctx: &RowCtx, x0: usize, s: &mut [u16], state: &mut [u16], m
     }
 }
 
+/// The penalties (P1 7, P2 90, optionally adapted to `grey`) and dimensions of the
+/// aggregation tests of SGM and MGM.
+#[cfg(test)]
+pub(crate) fn test_setup(
+    grey: &[f32],
+    adapt: bool,
+    (width, height, n_disp): (usize, usize, usize),
+) -> (Penalties<'_>, Dims) {
+    let pen = Penalties {
+        p1: 7,
+        p2: 90,
+        adapt: adapt.then_some((grey, 0.1)),
+    };
+    let dims = Dims {
+        width,
+        height,
+        n_disp,
+    };
+    (pen, dims)
+}
+
 /// A seeded random cost volume (`w · h · n`, 0..63) and grey image (`w · h`, 0..1) for the
 /// aggregation tests of SGM and MGM.
 #[cfg(test)]
@@ -505,16 +526,7 @@ mod tests {
 
     fn check(w: usize, h: usize, n: usize, diagonals: bool, adapt: bool) {
         let (cost, grey) = random_inputs(w, h, n, 12345);
-        let pen = Penalties {
-            p1: 7,
-            p2: 90,
-            adapt: adapt.then_some((&grey[..], 0.1)),
-        };
-        let dims = Dims {
-            width: w,
-            height: h,
-            n_disp: n,
-        };
+        let (pen, dims) = test_setup(&grey, adapt, (w, h, n));
         let mut sum = vec![0u16; w * h * n];
         aggregate(&cost, &mut sum, dims, &pen, diagonals, &|| {});
         assert_eq!(sum, reference(&cost, dims, &pen, diagonals));

@@ -399,16 +399,7 @@ mod tests {
 
     fn check(w: usize, h: usize, n: usize, adapt: bool) {
         let (cost, grey) = crate::aggregate::random_inputs(w, h, n, 987);
-        let pen = Penalties {
-            p1: 7,
-            p2: 90,
-            adapt: adapt.then_some((&grey[..], 0.1)),
-        };
-        let dims = Dims {
-            width: w,
-            height: h,
-            n_disp: n,
-        };
+        let (pen, dims) = crate::aggregate::test_setup(&grey, adapt, (w, h, n));
         let mut sum = vec![7u16; w * h * n];
         aggregate_mgm(&cost, &mut sum, dims, &pen, &|| {});
         assert_eq!(sum, reference(&cost, dims, &pen), "{w}x{h}x{n}");
