@@ -45,8 +45,8 @@ pub struct PredictArgs {
 }
 
 pub fn run(a: PredictArgs, progress: &dyn Progress) -> Result<()> {
-    let (left, right) = read_pair(&a.left, &a.right)?;
     let matcher = a.matcher.matcher()?;
+    let (left, right) = read_pair(&a.left, &a.right)?;
     let matched = matcher.disparity(
         &left,
         &right,
