@@ -110,23 +110,40 @@ pub fn valid_pixels(disparity: &Image, border: usize) -> Mask {
     })
 }
 
-/// Triangulates the disparity and writes the DSM.
-pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
-    let disparity = raster::read_image(&opts.disparity)
-        .with_context(|| format!("reading the disparity {}", opts.disparity.display()))?;
-    if disparity.channels() != 1 {
+/// Triangulates a rectified pair's disparity file through its homographies and the two camera
+/// files (every finite pixel whose match falls inside the right image, `border` pixels ignored).
+pub fn triangulate_files(
+    disparity: &Path,
+    homography: &Path,
+    [rpc_left, rpc_right]: [&Path; 2],
+    border: usize,
+) -> Result<Points> {
+    let d = raster::read_image(disparity)
+        .with_context(|| format!("reading the disparity {}", disparity.display()))?;
+    if d.channels() != 1 {
         bail!(
             "{}: a disparity has one channel, this raster has {}",
-            opts.disparity.display(),
-            disparity.channels()
+            disparity.display(),
+            d.channels()
         );
     }
-    let (h_left, h_right) = raster::formats::read_homographies(&opts.homography)?;
+    let (h_left, h_right) = raster::formats::read_homographies(homography)?;
+    let rpc_l = read_camera(rpc_left)?;
+    let rpc_r = read_camera(rpc_right)?;
+    let mask = valid_pixels(&d, border);
+    triangulate_disparity(&d, &h_left, &h_right, &rpc_l, &rpc_r, &mask)
+        .with_context(|| format!("triangulating {}", disparity.display()))
+}
+
+/// Triangulates the disparity and writes the DSM.
+pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
+    let points = triangulate_files(
+        &opts.disparity,
+        &opts.homography,
+        [&opts.rpc_left, &opts.rpc_right],
+        opts.border,
+    )?;
     let rpc_left = read_camera(&opts.rpc_left)?;
-    let rpc_right = read_camera(&opts.rpc_right)?;
-    let mask = valid_pixels(&disparity, opts.border);
-    let points = triangulate_disparity(&disparity, &h_left, &h_right, &rpc_left, &rpc_right, &mask)
-        .with_context(|| format!("triangulating {}", opts.disparity.display()))?;
     if points.valid_count() == 0 {
         bail!(
             "{}: no pixel could be triangulated (no finite disparity inside the right image)",

@@ -448,7 +448,6 @@ pub fn run_masks(opts: &MasksOptions, progress: &dyn Progress) -> Result<BatchSu
         &MasksRecord {
             segmenter: name.clone(),
         },
-        |old, new| old == new,
         |old| {
             format!(
                 "{} holds masks of another segmenter ({}); write these ({name}) to another folder",

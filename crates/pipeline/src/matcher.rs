@@ -96,12 +96,20 @@ impl Matcher {
         }
     }
 
-    /// What a record needs to tell two matchers apart and to rerun one: `kind` (`sgm` for the
-    /// classical matcher, `monsterpp`), a description and the settings.
-    pub fn record(&self) -> serde_json::Value {
+    /// `sgm` for the classical matcher (MGM or SGM), `monsterpp` for the network.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Matcher::Classical(_) => "sgm",
+            #[cfg(feature = "network")]
+            Matcher::Network(_) => "monsterpp",
+        }
+    }
+
+    /// What a record needs, beside [`Matcher::kind`], to tell two matchers apart and to rerun
+    /// one: a description and the settings (a JSON object).
+    pub fn settings(&self) -> serde_json::Value {
         match self {
             Matcher::Classical(p) => json!({
-                "kind": "sgm",
                 "description": p.describe(),
                 "p1": p.p1,
                 "p2": p.p2,
@@ -118,7 +126,6 @@ impl Matcher {
             Matcher::Network(n) => {
                 let o = &n.options;
                 json!({
-                    "kind": "monsterpp",
                     "description": "MonSter++ (zero-shot, frozen)",
                     "weights": o.weights.display().to_string(),
                     "preset": o.preset,

@@ -161,6 +161,31 @@ impl PairFolder {
         Ok(read_homographies(&path)?)
     }
 
+    /// Every record of `rectify/`, sorted by file name (the pairs `rectify` or `reconstruct
+    /// --keep-intermediates` made, whether or not their images are still here).
+    pub fn rectify_records(&self) -> Result<Vec<RectifyRecord>> {
+        let dir = self.root.join("rectify");
+        let entries = std::fs::read_dir(&dir).with_context(|| {
+            format!(
+                "{}: no rectify records; give the folder `seasonstereo rectify` wrote (it holds \
+                 rectify/<pair>.json)",
+                self.root.display()
+            )
+        })?;
+        let mut files: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().and_then(|e| e.to_str()) == Some("json"))
+            .collect();
+        files.sort();
+        files
+            .iter()
+            .map(|f| {
+                crate::stage::read_json(f)?
+                    .with_context(|| format!("{} vanished while listing", f.display()))
+            })
+            .collect()
+    }
+
     /// How `rectify` made pair `stem`, when it did.
     pub fn rectify_record(&self, stem: &str) -> Result<Option<RectifyRecord>> {
         let record: Option<RectifyRecord> =

@@ -97,18 +97,16 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<Option<T>> {
     })
 }
 
-/// Claims an output folder for one producer (a teacher, a generator, a segmenter, a scene's
-/// settings) through its record at `path`: the record is written when absent; a record that
-/// `same` does not accept refuses the run with `conflict(old record)`, so outputs of two
-/// producers are never mixed in one folder.
-pub fn claim_folder<T: Serialize + DeserializeOwned>(
+/// Claims an output folder for one producer (a teacher, a generator, a segmenter) through its
+/// record at `path`: the record is written when absent; a different record refuses the run with
+/// `conflict(old record)`, so outputs of two producers are never mixed in one folder.
+pub fn claim_folder<T: Serialize + DeserializeOwned + PartialEq>(
     path: &Path,
     record: &T,
-    same: impl Fn(&T, &T) -> bool,
     conflict: impl FnOnce(&T) -> String,
 ) -> Result<()> {
     match read_json::<T>(path)? {
-        Some(old) if same(&old, record) => Ok(()),
+        Some(old) if old == *record => Ok(()),
         Some(old) => bail!("{}", conflict(&old)),
         None => write_json(path, record),
     }

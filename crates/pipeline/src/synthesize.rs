@@ -345,18 +345,13 @@ fn claim_generator(layout: &SyntheticLayout, name: &str) -> Result<()> {
     let record = GeneratorRecord {
         generator: name.to_string(),
     };
-    claim_folder(
-        &layout.record(),
-        &record,
-        |old, new| old == new,
-        |old| {
-            format!(
-                "{} holds variants of generator {} (not {name}): use another output folder",
-                layout.root.display(),
-                old.generator
-            )
-        },
-    )
+    claim_folder(&layout.record(), &record, |old| {
+        format!(
+            "{} holds variants of generator {} (not {name}): use another output folder",
+            layout.root.display(),
+            old.generator
+        )
+    })
 }
 
 /// The generator recorded in a synthesize folder.

@@ -41,14 +41,10 @@ pub struct TeacherRecord {
 impl TeacherRecord {
     /// The record of `matcher` run over `range` (every pair), or per pair.
     pub fn new(matcher: &Matcher, range: Option<DisparityRange>) -> Self {
-        let mut settings = match matcher.record() {
+        let settings = match matcher.settings() {
             serde_json::Value::Object(m) => m,
             _ => serde_json::Map::new(),
         };
-        let kind = settings
-            .remove("kind")
-            .and_then(|k| k.as_str().map(str::to_string))
-            .unwrap_or_default();
         let range = matches!(matcher, Matcher::Classical(_)).then(|| match range {
             Some((lo, hi)) => serde_json::json!([lo, hi]),
             None => {
@@ -56,7 +52,7 @@ impl TeacherRecord {
             }
         });
         TeacherRecord {
-            teacher: kind,
+            teacher: matcher.kind().to_string(),
             range,
             settings,
         }
@@ -99,20 +95,15 @@ pub fn disparity_path(teacher_dir: &Path, stem: &str) -> PathBuf {
 /// Checks `teacher.json` in `out_dir` against `record`, writing it when absent. A different
 /// teacher already recorded there is an error: its disparities would be mixed with these.
 pub fn claim_teacher_folder(out_dir: &Path, record: &TeacherRecord) -> Result<()> {
-    claim_folder(
-        &out_dir.join(RECORD_FILE),
-        record,
-        |old, new| old == new,
-        |old| {
-            format!(
-                "{} holds disparities of another teacher ({}); write this teacher ({}) to another \
+    claim_folder(&out_dir.join(RECORD_FILE), record, |old| {
+        format!(
+            "{} holds disparities of another teacher ({}); write this teacher ({}) to another \
                  folder, or empty the folder to redo it",
-                out_dir.display(),
-                old.teacher,
-                record.teacher
-            )
-        },
-    )
+            out_dir.display(),
+            old.teacher,
+            record.teacher
+        )
+    })
 }
 
 /// Runs the teacher over the pairs of the shard that have no disparity yet.

@@ -13,14 +13,14 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use anyhow::{bail, Context, Result};
-use camera::{fill_holes, median_filter, rasterize, triangulate_disparity, DsmGrid, Gridding};
+use camera::{rasterize, DsmGrid, Gridding};
 use camera::{Points, RpcModel, UtmZone};
 use raster::Image;
 
 use super::project::render_into_image;
-use crate::dsm::{read_camera, valid_pixels};
+use crate::dsm::{finish_dsm, read_camera, triangulate_files};
+use crate::pairs::PairFolder;
 use crate::rectify::{RectifiedFiles, RectifyRecord};
-use crate::stage::read_json;
 
 /// Cell size of the heights grid, metres.
 const RESOLUTION: f64 = 0.5;
@@ -86,22 +86,8 @@ impl PairIndex {
     /// `disparities/<stem>.iio` (a `teacher` folder, or a `reconstruct` work folder's
     /// `disparity/`).
     pub fn read(pairs: &Path, disparities: &Path) -> Result<Self> {
-        let dir = pairs.join("rectify");
-        let entries = std::fs::read_dir(&dir).with_context(|| {
-            format!(
-                "{}: no rectify records; give the folder `seasonstereo rectify` wrote (it holds rectify/<pair>.json)",
-                pairs.display()
-            )
-        })?;
-        let mut files: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().and_then(|e| e.to_str()) == Some("json"))
-            .collect();
-        files.sort();
         let mut index = PairIndex::default();
-        for file in files {
-            let record: RectifyRecord = read_json(&file)?
-                .with_context(|| format!("{} vanished while listing", file.display()))?;
+        for record in PairFolder::new(pairs).rectify_records()? {
             let RectifyRecord {
                 stem,
                 left,
@@ -199,14 +185,12 @@ pub struct ImageHeights {
 
 /// Triangulates one pair's disparity (every finite pixel whose match is inside the right image).
 fn triangulate(pair: &StereoPair) -> Result<Points> {
-    let disparity = raster::read_image(&pair.disparity)
-        .with_context(|| format!("reading the disparity {}", pair.disparity.display()))?;
-    let (h_left, h_right) = raster::formats::read_homographies(&pair.homography)?;
-    let rpc_l = read_camera(&pair.rpc_left)?;
-    let rpc_r = read_camera(&pair.rpc_right)?;
-    let mask = valid_pixels(&disparity, 0);
-    triangulate_disparity(&disparity, &h_left, &h_right, &rpc_l, &rpc_r, &mask)
-        .with_context(|| format!("triangulating {}", pair.disparity.display()))
+    triangulate_files(
+        &pair.disparity,
+        &pair.homography,
+        [&pair.rpc_left, &pair.rpc_right],
+        0,
+    )
 }
 
 /// The UTM grid over the image's footprint at the points' median altitude, 10 m margin.
@@ -348,7 +332,7 @@ pub fn image_heights(
         lonlatalt: all,
     };
     let measured = rasterize(&points, &grid, Gridding::Median);
-    let filled = median_filter(&fill_holes(&measured, FILL_CELLS).0, MEDIAN_CELLS);
+    let filled = finish_dsm(measured.clone(), Some(FILL_CELLS), Some(MEDIAN_CELLS))?;
     let ground = ground_level(&filled, RESOLUTION);
     let above = |dsm: &Image| {
         let data = dsm
