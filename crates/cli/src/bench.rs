@@ -58,6 +58,11 @@ pub struct BenchArgs {
     /// Print one JSON line instead of the sentence.
     #[arg(long)]
     json: bool,
+    /// After the timed runs, one more run with the time of every module group (MonSter++:
+    /// DINOv2, DPT heads, stems, GWC volume, hourglass, geo lookup, ConvGRU, refinement,
+    /// upsampling, REMP; the groups of `scripts/peers/monsterpp_torch.py --profile`).
+    #[arg(long)]
+    profile: bool,
     #[command(flatten)]
     device: DeviceArg,
 }
@@ -101,6 +106,14 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let times = (0..a.runs)
         .map(|_| timed(&mut work))
         .collect::<Result<Vec<f64>>>()?;
+    let profile = if a.profile {
+        let recording = nn::profile::Recording::start(&device)
+            .ok_or_else(|| anyhow!("another profile is already recording"))?;
+        let total = timed(&mut work)?;
+        Some((total, recording.finish()))
+    } else {
+        None
+    };
     let median = pipeline::eval::aggregate::median(&times).expect("at least one run");
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let peak = train::metrics::peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64);
@@ -113,13 +126,25 @@ pub fn run(a: BenchArgs) -> Result<()> {
         BenchWorkload::Dinov3 => format!("{batch}x{h}x{h}"),
         _ => format!("{h}x{w}"),
     };
+    let profile = profile.map(|(total, mut groups)| {
+        let covered: f64 = groups.iter().map(|g| g.seconds).sum();
+        groups.push(nn::profile::GroupTime {
+            group: "other",
+            seconds: (total - covered).max(0.0),
+            calls: 0,
+        });
+        (total, groups)
+    });
     if a.json {
-        let v = serde_json::json!({
+        let mut v = serde_json::json!({
             "workload": name, "config": preset, "shape": shape, "iters": iters,
             "max_disp": a.max_disp, "batch": batch, "device": a.device.device.name(),
             "threads": std::thread::available_parallelism().map_or(1, |n| n.get()), "runs": a.runs, "warmup_s": warmup,
             "median_s": median, "min_s": min, "times_s": times, "peak_rss_mib": peak,
         });
+        if let Some((total, groups)) = &profile {
+            v["profile"] = serde_json::json!({ "total_s": total, "groups": groups });
+        }
         println!("{v}");
     } else {
         println!(
@@ -135,6 +160,18 @@ pub fn run(a: BenchArgs) -> Result<()> {
             a.runs,
             peak.map_or("n/a".into(), |m| format!("{m:.0} MiB"))
         );
+        if let Some((total, groups)) = &profile {
+            println!("profiled run {total:.3} s:");
+            for g in groups {
+                println!(
+                    "  {:40} {:8.3} s {:5.1} %  ({} calls)",
+                    g.group,
+                    g.seconds,
+                    100.0 * g.seconds / total,
+                    g.calls
+                );
+            }
+        }
     }
     Ok(())
 }

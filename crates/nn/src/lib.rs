@@ -43,6 +43,7 @@ pub mod device;
 pub mod dinov3;
 pub mod infer;
 pub mod monster;
+pub mod profile;
 pub mod resize;
 pub mod segformer;
 pub mod weights;

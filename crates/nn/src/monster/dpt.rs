@@ -334,12 +334,17 @@ pub fn infer_mono(
     right_normalized: Tensor<4>,
 ) -> MonoOutput {
     use crate::monster::vit::mono_input;
+    use crate::profile::span;
     let [_, _, h, w] = left_normalized.dims();
-    let fl = mono_encoder.forward_intermediate(mono_input(left_normalized));
-    let fr = mono_encoder.forward_intermediate(mono_input(right_normalized));
-    MonoOutput {
+    let (fl, fr) = span("dinov2", || {
+        (
+            mono_encoder.forward_intermediate(mono_input(left_normalized)),
+            mono_encoder.forward_intermediate(mono_input(right_normalized)),
+        )
+    });
+    span("dpt heads", || MonoOutput {
         depth_mono: mono_decoder.forward_depth(&fl, [h, w]),
         features_left: feat_decoder.forward_features(&fl),
         features_right: feat_decoder.forward_features(&fr),
-    }
+    })
 }

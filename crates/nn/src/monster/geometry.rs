@@ -12,6 +12,9 @@
 
 use burn::tensor::{Int, Tensor};
 
+/// Profile group of the volume's construction and its lookups.
+pub const GEO: &str = "geo encoding lookup";
+
 /// The precomputed pyramids of a forward pass (upstream `Combined_Geo_Encoding_Volume`).
 #[derive(Debug, Clone)]
 pub struct GeoEncodingVolume {

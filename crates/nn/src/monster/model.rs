@@ -48,7 +48,7 @@ use super::dpt::{infer_mono, DptHead};
 use super::features::{
     conv2d, conv_in_block_forward, BasicConvIn, ConvInBlock, FeatTransfer, StereoFeatures,
 };
-use super::geometry::GeoEncodingVolume;
+use super::geometry::{GeoEncodingVolume, GEO};
 use super::remp::Remp;
 use super::update::{
     iterate, BasicMultiUpdateBlock, BasicMultiUpdateBlockMix2, GruContext, IterationBlocks,
@@ -56,7 +56,11 @@ use super::update::{
 };
 use super::upsample::{context_upsample, freeze_bn, spx_gru_init, Conv2x};
 use super::vit::{normalize_image, DinoVisionTransformer};
+
+/// Profile group of the stereo feature stems and the GRU context.
+const STEMS: &str = "feature stems + context";
 use crate::config::MonsterConfig;
+use crate::profile::span;
 use crate::resize::resize_bilinear;
 use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
 
@@ -234,37 +238,52 @@ impl Monster {
         let disp_mono_4x = resize_bilinear(depth_mono.clone(), [h / 4, w / 4], false);
 
         // Stereo features (§2.2).
-        let [fl4, fl8, fl16, fl32] = self.feat_transfer.forward(mono.features_left.clone());
-        let [fr4, _, _, _] = self.feat_transfer.forward(mono.features_right);
-        let stem_2x = conv_in_block_forward(&self.stem_2, image1.clone());
-        let stem_4x = conv_in_block_forward(&self.stem_4, stem_2x.clone());
-        let stem_8x = conv_in_block_forward(&self.stem_8, stem_4x.clone());
-        let stem_16x = conv_in_block_forward(&self.stem_16, stem_8x.clone());
-        let stem_2y = conv_in_block_forward(&self.stem_2, image2.clone());
-        let stem_4y = conv_in_block_forward(&self.stem_4, stem_2y);
-        let features_left = [Tensor::cat(vec![fl4, stem_4x.clone()], 1), fl8, fl16, fl32];
-        let features_right0 = Tensor::cat(vec![fr4, stem_4y], 1);
-        let match_left = self
-            .desc
-            .forward(self.conv.forward(features_left[0].clone()));
-        let match_right = self
-            .desc
-            .forward(self.conv.forward(features_right0.clone()));
+        let stems = span(STEMS, || {
+            let [fl4, fl8, fl16, fl32] = self.feat_transfer.forward(mono.features_left.clone());
+            let [fr4, _, _, _] = self.feat_transfer.forward(mono.features_right);
+            let stem_2x = conv_in_block_forward(&self.stem_2, image1.clone());
+            let stem_4x = conv_in_block_forward(&self.stem_4, stem_2x.clone());
+            let stem_8x = conv_in_block_forward(&self.stem_8, stem_4x.clone());
+            let stem_16x = conv_in_block_forward(&self.stem_16, stem_8x.clone());
+            let stem_2y = conv_in_block_forward(&self.stem_2, image2.clone());
+            let stem_4y = conv_in_block_forward(&self.stem_4, stem_2y);
+            let features_left = [Tensor::cat(vec![fl4, stem_4x.clone()], 1), fl8, fl16, fl32];
+            let features_right0 = Tensor::cat(vec![fr4, stem_4y], 1);
+            let match_left = self
+                .desc
+                .forward(self.conv.forward(features_left[0].clone()));
+            let match_right = self
+                .desc
+                .forward(self.conv.forward(features_right0.clone()));
+            (
+                [stem_2x, stem_4x, stem_8x, stem_16x],
+                features_left,
+                features_right0,
+                match_left,
+                match_right,
+            )
+        });
+        let ([stem_2x, stem_4x, stem_8x, stem_16x], features_left, features_right0, match_left, match_right) =
+            stems;
 
         // Cost volume, 3-D aggregation, initial disparity (§2.3).
-        let gwc = build_gwc_volume(
-            match_left.clone(),
-            match_right.clone(),
-            self.config.disp_bins(),
-            GWC_GROUPS,
-        );
-        let gwc = self
-            .corr_feature_att
-            .forward(self.corr_stem.forward(gwc), features_left[0].clone());
-        let geo_volume = self.cost_agg.forward(gwc, &features_left);
-        let logits: Tensor<5> = self.classifier.forward(geo_volume.clone());
-        let prob = softmax(logits.squeeze_dim::<4>(1), 1);
-        let init_disp = disparity_regression(prob);
+        let gwc = span("gwc volume", || {
+            build_gwc_volume(
+                match_left.clone(),
+                match_right.clone(),
+                self.config.disp_bins(),
+                GWC_GROUPS,
+            )
+        });
+        let (geo_volume, init_disp) = span("3-d hourglass + init disparity", || {
+            let gwc = self
+                .corr_feature_att
+                .forward(self.corr_stem.forward(gwc), features_left[0].clone());
+            let geo_volume = self.cost_agg.forward(gwc, &features_left);
+            let logits: Tensor<5> = self.classifier.forward(geo_volume.clone());
+            let prob = softmax(logits.squeeze_dim::<4>(1), 1);
+            (geo_volume, disparity_regression(prob))
+        });
 
         let init_disp_up = (!test_mode).then(|| {
             let x = conv_in_block_forward(&self.spx_4, features_left[0].clone());
@@ -274,30 +293,35 @@ impl Monster {
         });
 
         // Context (§2.4).
-        let cnet = self
-            .feat_transfer_cnet
-            .forward(&mono.features_left, [stem_4x, stem_8x, stem_16x]);
-        let net = cnet.clone().map(tanh);
-        let inp: [GruContext; 3] = std::array::from_fn(|i| {
-            let conv = &self.context_zqr_convs[i];
-            let y = conv.forward(relu(cnet[i].clone()));
-            let c = y.dims()[1] / 3;
-            let mut parts = y.split(c, 1).into_iter();
-            [
-                parts.next().expect("cz"),
-                parts.next().expect("cr"),
-                parts.next().expect("cq"),
-            ]
+        let (net, inp) = span(STEMS, || {
+            let cnet = self
+                .feat_transfer_cnet
+                .forward(&mono.features_left, [stem_4x, stem_8x, stem_16x]);
+            let net = cnet.clone().map(tanh);
+            let inp: [GruContext; 3] = std::array::from_fn(|i| {
+                let conv = &self.context_zqr_convs[i];
+                let y = conv.forward(relu(cnet[i].clone()));
+                let c = y.dims()[1] / 3;
+                let mut parts = y.split(c, 1).into_iter();
+                [
+                    parts.next().expect("cz"),
+                    parts.next().expect("cr"),
+                    parts.next().expect("cq"),
+                ]
+            });
+            (net, inp)
         });
 
         // Combined Geo Encoding Volume (§2.5) and the iterations (§2.6).
-        let geo = GeoEncodingVolume::new(
-            match_left,
-            match_right,
-            geo_volume,
-            self.config.corr_radius,
-            self.config.corr_levels,
-        );
+        let geo = span(GEO, || {
+            GeoEncodingVolume::new(
+                match_left,
+                match_right,
+                geo_volume,
+                self.config.corr_radius,
+                self.config.corr_levels,
+            )
+        });
         let [features_left0, ..] = features_left;
         let out = iterate(
             &self.iteration_blocks(),

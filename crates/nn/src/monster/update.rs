@@ -330,7 +330,12 @@ impl BasicMultiUpdateBlockMix2 {
 
 use burn::nn::conv::ConvTranspose2d;
 
-use super::geometry::GeoEncodingVolume;
+use super::geometry::{GeoEncodingVolume, GEO};
+use crate::profile::span;
+
+/// Profile groups of the refinement loop.
+const GRU: &str = "convgru updates";
+const UPSAMPLING: &str = "upsampling";
 use super::remp::Remp;
 use super::scale_shift::align_mono;
 use super::upsample::{upsample_disp, Conv2x};
@@ -447,27 +452,33 @@ pub fn iterate_traced(
         if itr >= 1 {
             disp_mono_4x = disp_mono_4x.detach();
         }
-        let geo_feat = geo.lookup(&disp);
+        let geo_feat = span(GEO, || geo.lookup(&disp));
         emit("geo_feat", &geo_feat);
         let out = if itr <= n - 8 {
-            let out = blocks
-                .update_block
-                .forward(net_list, &inp, geo_feat, disp.clone());
+            let out = span(GRU, || {
+                blocks
+                    .update_block
+                    .forward(net_list, &inp, geo_feat, disp.clone())
+            });
             emit_block("update_block", &out, &mut emit);
             out
         } else {
-            if itr == n - 7 {
-                let (aligned, params) = align_mono(disp_mono_4x, &disp);
-                disp_mono_4x = aligned;
-                scale_shift = params;
-            }
-            let warped_mono = disp_warp(features_right0.clone(), disp_mono_4x.clone());
+            let (warped_mono, warped_stereo) = span("mutual refinement (warp, scale/shift)", || {
+                if itr == n - 7 {
+                    let (aligned, params) = align_mono(disp_mono_4x.clone(), &disp);
+                    disp_mono_4x = aligned;
+                    scale_shift = params;
+                }
+                (
+                    disp_warp(features_right0.clone(), disp_mono_4x.clone()),
+                    disp_warp(features_right0.clone(), disp.clone()),
+                )
+            });
             emit("feat_warp", &warped_mono);
             let flaw_mono = warped_mono - features_left0.clone();
-            let warped_stereo = disp_warp(features_right0.clone(), disp.clone());
             emit("feat_warp", &warped_stereo);
             let flaw_stereo = warped_stereo - features_left0.clone();
-            let geo_feat_mono = geo.lookup(&disp_mono_4x);
+            let geo_feat_mono = span(GEO, || geo.lookup(&disp_mono_4x));
             let stereo = Branch {
                 disp: disp.clone(),
                 corr: geo_feat,
@@ -478,24 +489,30 @@ pub fn iterate_traced(
                 corr: geo_feat_mono,
                 flaw: flaw_mono,
             };
-            let out = blocks
-                .update_block_mix_stereo
-                .forward(net_list, &inp, &stereo, &mono);
+            let out = span(GRU, || {
+                blocks
+                    .update_block_mix_stereo
+                    .forward(net_list, &inp, &stereo, &mono)
+            });
             emit_block("update_block_mix_stereo", &out, &mut emit);
-            let out_m = blocks
-                .update_block_mix_mono
-                .forward(net_mono, &inp, &mono, &stereo);
+            let out_m = span(GRU, || {
+                blocks
+                    .update_block_mix_mono
+                    .forward(net_mono, &inp, &mono, &stereo)
+            });
             emit_block("update_block_mix_mono", &out_m, &mut emit);
             disp_mono_4x = disp_mono_4x + out_m.delta;
             net_mono = out_m.net;
             if !test_mode || itr == n - 1 {
-                let up = upsample_disp(
-                    blocks.spx_2_gru,
-                    blocks.spx_gru,
-                    disp_mono_4x.clone(),
-                    out_m.mask_feat,
-                    stem_2x.clone(),
-                );
+                let up = span(UPSAMPLING, || {
+                    upsample_disp(
+                        blocks.spx_2_gru,
+                        blocks.spx_gru,
+                        disp_mono_4x.clone(),
+                        out_m.mask_feat,
+                        stem_2x.clone(),
+                    )
+                });
                 emit("upsample_disp", &up);
                 if !test_mode {
                     disp_preds.push(up.clone());
@@ -509,21 +526,25 @@ pub fn iterate_traced(
         if test_mode && itr < n - 1 {
             continue;
         }
-        let mut up = upsample_disp(
-            blocks.spx_2_gru,
-            blocks.spx_gru,
-            disp.clone(),
-            out.mask_feat,
-            stem_2x.clone(),
-        );
+        let mut up = span(UPSAMPLING, || {
+            upsample_disp(
+                blocks.spx_2_gru,
+                blocks.spx_gru,
+                disp.clone(),
+                out.mask_feat,
+                stem_2x.clone(),
+            )
+        });
         emit("upsample_disp", &up);
         if itr == n - 1 {
             let mono = mono_up
                 .clone()
                 .expect("the last iteration is a dual-branch one");
-            let refined = blocks
-                .remp
-                .forward(mono, up.clone(), image1.clone(), image2.clone());
+            let refined = span("remp", || {
+                blocks
+                    .remp
+                    .forward(mono, up.clone(), image1.clone(), image2.clone())
+            });
             emit("REMP", &refined);
             up = up + refined; // quirk 4: disp_up + LeakyReLU(disp_up + residual)
         }
