@@ -2,6 +2,11 @@
 //!
 //! This binary only parses arguments and draws progress; the work lives in the library crates.
 
+/// Tensors of the networks come and go by the megabyte: mimalloc reuses their pages where the
+/// system allocator returns them to the kernel and faults them in again (BENCHMARKS.md).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 mod args;
 mod bars;
 mod bench;

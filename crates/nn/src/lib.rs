@@ -39,6 +39,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod conv;
 pub mod device;
 pub mod dinov3;
 pub mod infer;

@@ -114,7 +114,10 @@ mod tests {
         let device = Device::flex();
         assert_eq!(span("before", || 1), 1);
         let rec = Recording::start(&device).expect("no other recording");
-        assert!(Recording::start(&device).is_none(), "one recording at a time");
+        assert!(
+            Recording::start(&device).is_none(),
+            "one recording at a time"
+        );
         span("a", || std::thread::sleep(Duration::from_millis(20)));
         span("b", || ());
         span("a", || std::thread::sleep(Duration::from_millis(20)));
@@ -124,6 +127,9 @@ mod tests {
         assert!(groups[0].seconds >= 0.04, "{groups:?}");
         span("after", || ());
         let rec = Recording::start(&device).expect("the first one finished");
-        assert!(rec.finish().is_empty(), "spans after a recording are not kept");
+        assert!(
+            rec.finish().is_empty(),
+            "spans after a recording are not kept"
+        );
     }
 }

@@ -9,6 +9,7 @@
 //! Shapes (F = DPT `features`, C = hidden dim, 128 upstream, 32 in the tiny fixture): every list
 //! is ordered `[1/4 (h×w), 1/8, 1/16]`.
 
+use crate::conv::conv2d_forward;
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
@@ -43,15 +44,12 @@ impl FeatTransferCnet {
         stems_4_8_16: [Tensor<4>; 3],
     ) -> [Tensor<4>; 3] {
         let [s4, s8, s16] = stems_4_8_16;
-        let c16 = self
-            .res_16x
-            .forward(Tensor::cat(vec![dpt_paths[2].clone(), s16], 1));
-        let c8 = self
-            .res_8x
-            .forward(Tensor::cat(vec![dpt_paths[1].clone(), s8], 1));
-        let c4 = self
-            .res_4x
-            .forward(Tensor::cat(vec![dpt_paths[0].clone(), s4], 1));
+        let c16 = conv2d_forward(
+            &self.res_16x,
+            Tensor::cat(vec![dpt_paths[2].clone(), s16], 1),
+        );
+        let c8 = conv2d_forward(&self.res_8x, Tensor::cat(vec![dpt_paths[1].clone(), s8], 1));
+        let c4 = conv2d_forward(&self.res_4x, Tensor::cat(vec![dpt_paths[0].clone(), s4], 1));
         [c4, c8, c16]
     }
 }
@@ -101,7 +99,7 @@ impl ContextNet {
             .iter()
             .zip(&self.context_zqr_convs)
             .map(|(x, conv)| {
-                let y = conv.forward(x.clone());
+                let y = conv2d_forward(conv, x.clone());
                 let c = y.dims()[1] / 3;
                 let mut parts = y.split(c, 1).into_iter();
                 [

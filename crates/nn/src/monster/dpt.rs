@@ -5,6 +5,7 @@
 
 #![allow(non_snake_case)]
 
+use crate::conv::conv2d_forward;
 use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, PaddingConfig2d};
@@ -102,9 +103,10 @@ impl ResidualConvUnit {
 
     /// Applies the unit.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let out = self
-            .conv2
-            .forward(relu(self.conv1.forward(relu(x.clone()))));
+        let out = conv2d_forward(
+            &self.conv2,
+            relu(conv2d_forward(&self.conv1, relu(x.clone()))),
+        );
         out + x
     }
 }
@@ -144,7 +146,7 @@ impl FeatureFusionBlock {
         let out = self.resConfUnit2.forward(out);
         let [_, _, h, w] = out.dims();
         let size = size.unwrap_or([2 * h, 2 * w]);
-        self.out_conv.forward(resize_bilinear(out, size, true))
+        conv2d_forward(&self.out_conv, resize_bilinear(out, size, true))
     }
 }
 
@@ -243,7 +245,7 @@ impl DptHead {
                 let [b, n, e] = t.dims();
                 debug_assert_eq!(n, gh * gw);
                 let x = t.clone().swap_dims(1, 2).reshape([b, e, gh, gw]);
-                let x = self.projects[i].forward(x);
+                let x = conv2d_forward(&self.projects[i], x);
                 let x = match &self.resize_layers[i] {
                     Some(layer) => layer.forward(x),
                     None => x,
@@ -278,11 +280,17 @@ impl DptHead {
             .output_conv2
             .as_ref()
             .expect("forward_depth needs the depth head (output_conv2)");
-        let out = oc1.forward(p1);
+        let out = conv2d_forward(oc1, p1);
         let (gh, gw) = feats.grid;
         let out = resize_bilinear(out, [gh * 14, gw * 14], true);
-        let out = relu(oc2[0].as_ref().expect("output_conv2.0").forward(out));
-        let out = relu(oc2[2].as_ref().expect("output_conv2.2").forward(out));
+        let out = relu(conv2d_forward(
+            oc2[0].as_ref().expect("output_conv2.0"),
+            out,
+        ));
+        let out = relu(conv2d_forward(
+            oc2[2].as_ref().expect("output_conv2.2"),
+            out,
+        ));
         // MonSter: F.relu (a no-op after the last ReLU) then resize to the input size.
         resize_bilinear(relu(out), out_size, false)
     }

@@ -11,6 +11,7 @@
 //! - stems → `[32×H/2, 48×H/4, 96×H/8, 192×H/16]`
 //! - `features[0] = cat(f4, stem_4)` → 96×h×w; matching features 96×h×w.
 
+use crate::conv::conv2d_forward;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::PaddingConfig2d;
@@ -94,14 +95,14 @@ pub fn conv_in_block(c_in: usize, c_out: usize, stride: usize, device: &Device) 
 
 /// Forward of a [`ConvInBlock`].
 pub fn conv_in_block_forward(block: &ConvInBlock, x: Tensor<4>) -> Tensor<4> {
-    relu(instance_norm(block.1.forward(block.0.forward(x))))
+    relu(instance_norm(conv2d_forward(&block.1, block.0.forward(x))))
 }
 
 /// `Conv2d → InstanceNorm → ReLU` as `nn.Sequential` (only the conv has weights, key `0.*`).
 pub type ConvInRelu = [Conv2d; 1];
 
 fn conv_in_relu_forward(block: &ConvInRelu, x: Tensor<4>) -> Tensor<4> {
-    relu(instance_norm(block[0].forward(x)))
+    relu(instance_norm(conv2d_forward(&block[0], x)))
 }
 
 fn conv_up(c_in: usize, c_out: usize, device: &Device) -> ConvTranspose2d {
@@ -151,13 +152,13 @@ impl FeatTransfer {
         let f32_ = conv_in_relu_forward(&self.conv32x, p32);
         let up = self.conv_up_32x.forward(f32_.clone());
         let f16 = conv_in_relu_forward(&self.conv16x, Tensor::cat(vec![p16.clone(), up], 1))
-            + self.res_16x.forward(p16);
+            + conv2d_forward(&self.res_16x, p16);
         let up = self.conv_up_16x.forward(f16.clone());
         let f8 = conv_in_relu_forward(&self.conv8x, Tensor::cat(vec![p8.clone(), up], 1))
-            + self.res_8x.forward(p8);
+            + conv2d_forward(&self.res_8x, p8);
         let up = self.conv_up_8x.forward(f8.clone());
         let f4 = conv_in_relu_forward(&self.conv4x, Tensor::cat(vec![p4.clone(), up], 1))
-            + self.res_4x.forward(p4);
+            + conv2d_forward(&self.res_4x, p4);
         [f4, f8, f16, f32_]
     }
 }
@@ -218,7 +219,7 @@ impl StereoFeatures {
 
     /// Matching descriptors `desc(conv(features0))`: `[B, 96, h, w]` → `[B, 96, h, w]`.
     pub fn matching(&self, features0: Tensor<4>) -> Tensor<4> {
-        self.desc.forward(self.conv.forward(features0))
+        conv2d_forward(&self.desc, self.conv.forward(features0))
     }
 
     /// One image: DPT paths of the feature decoder (`feat_decoder`) and the normalised image.

@@ -60,6 +60,7 @@ use super::vit::{normalize_image, DinoVisionTransformer};
 /// Profile group of the stereo feature stems and the GRU context.
 const STEMS: &str = "feature stems + context";
 use crate::config::MonsterConfig;
+use crate::conv::conv2d_forward;
 use crate::profile::span;
 use crate::resize::resize_bilinear;
 use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
@@ -249,12 +250,10 @@ impl Monster {
             let stem_4y = conv_in_block_forward(&self.stem_4, stem_2y);
             let features_left = [Tensor::cat(vec![fl4, stem_4x.clone()], 1), fl8, fl16, fl32];
             let features_right0 = Tensor::cat(vec![fr4, stem_4y], 1);
-            let match_left = self
-                .desc
-                .forward(self.conv.forward(features_left[0].clone()));
-            let match_right = self
-                .desc
-                .forward(self.conv.forward(features_right0.clone()));
+            let match_left =
+                conv2d_forward(&self.desc, self.conv.forward(features_left[0].clone()));
+            let match_right =
+                conv2d_forward(&self.desc, self.conv.forward(features_right0.clone()));
             (
                 [stem_2x, stem_4x, stem_8x, stem_16x],
                 features_left,
@@ -263,8 +262,13 @@ impl Monster {
                 match_right,
             )
         });
-        let ([stem_2x, stem_4x, stem_8x, stem_16x], features_left, features_right0, match_left, match_right) =
-            stems;
+        let (
+            [stem_2x, stem_4x, stem_8x, stem_16x],
+            features_left,
+            features_right0,
+            match_left,
+            match_right,
+        ) = stems;
 
         // Cost volume, 3-D aggregation, initial disparity (§2.3).
         let gwc = span("gwc volume", || {
@@ -300,7 +304,7 @@ impl Monster {
             let net = cnet.clone().map(tanh);
             let inp: [GruContext; 3] = std::array::from_fn(|i| {
                 let conv = &self.context_zqr_convs[i];
-                let y = conv.forward(relu(cnet[i].clone()));
+                let y = conv2d_forward(conv, relu(cnet[i].clone()));
                 let c = y.dims()[1] / 3;
                 let mut parts = y.split(c, 1).into_iter();
                 [

@@ -5,6 +5,7 @@
 
 #![allow(non_snake_case)]
 
+use crate::conv::conv2d_forward;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d, Relu};
@@ -43,7 +44,7 @@ fn conv_bn_lrelu(c_in: usize, c_out: usize, device: &Device) -> (Conv2d, BatchNo
 }
 
 fn apply_conv_bn_lrelu(m: &(Conv2d, BatchNorm), x: Tensor<4>) -> Tensor<4> {
-    leaky_relu(m.1.forward(m.0.forward(x)), 0.2)
+    leaky_relu(m.1.forward(conv2d_forward(&m.0, x)), 0.2)
 }
 
 /// Upstream `BasicConv_now` (2-D): conv (no bias) + BatchNorm2d + ReLU.
@@ -294,16 +295,22 @@ impl Remp {
         let x = Tensor::cat(vec![ref_mono, d_mono, ref_stereo, d_stereo], 1);
         let x = self.conv_start.forward(x);
         let x = self.RefinementBlock.forward(x);
-        let low = sigmoid(self.LFE.2.forward(relu(
-            self.LFE.0.forward(adaptive_avg_pool2d(x.clone(), [1, 1])),
-        )));
-        let motif = sigmoid(
-            self.LMC
-                .3
-                .forward(relu(self.LMC.1.forward(self.LMC.0.forward(x.clone())))),
-        );
+        let low = sigmoid(conv2d_forward(
+            &self.LFE.2,
+            relu(conv2d_forward(
+                &self.LFE.0,
+                adaptive_avg_pool2d(x.clone(), [1, 1]),
+            )),
+        ));
+        let motif = sigmoid(conv2d_forward(
+            &self.LMC.3,
+            relu(conv2d_forward(
+                &self.LMC.1,
+                conv2d_forward(&self.LMC.0, x.clone()),
+            )),
+        ));
         let x = motif.clone().neg().add_scalar(1.0) * low + motif * x;
-        let x = self.final_conv.forward(x);
+        let x = conv2d_forward(&self.final_conv, x);
         leaky_relu(disp_stereo + x, 0.01)
     }
 }

@@ -13,8 +13,11 @@ use burn::nn::{PaddingConfig2d, Relu};
 use burn::tensor::activation::{relu, sigmoid, tanh};
 use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::{Device, Tensor, TensorData};
 
+use rayon::prelude::*;
+
+use crate::conv::{conv2d_forward, conv2d_nchw, f32_vec, fast_padding, Nchw};
 use crate::resize::resize_bilinear;
 
 fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
@@ -65,12 +68,105 @@ impl ConvGru {
     /// `x_list` is concatenated along channels (upstream `*x_list`).
     pub fn forward(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
         let x = Tensor::cat(x_list, 1);
+        if let Some(h) = self.forward_fused(&h, ctx, &x) {
+            return h;
+        }
         let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
-        let z = sigmoid(self.convz.forward(hx.clone()) + ctx[0].clone());
-        let r = sigmoid(self.convr.forward(hx) + ctx[1].clone());
-        let q = tanh(self.convq.forward(Tensor::cat(vec![r * h.clone(), x], 1)) + ctx[2].clone());
+        let z = sigmoid(conv2d_forward(&self.convz, hx.clone()) + ctx[0].clone());
+        let r = sigmoid(conv2d_forward(&self.convr, hx) + ctx[1].clone());
+        let q = tanh(
+            conv2d_forward(&self.convq, Tensor::cat(vec![r * h.clone(), x], 1)) + ctx[2].clone(),
+        );
         (z.clone().neg().add_scalar(1.0)) * h + z * q
     }
+}
+
+impl ConvGru {
+    /// The same step on the CPU inference device without burn's element-wise passes: `convz`
+    /// and `convr` as one convolution (their weights stacked), the gates, `r·h` and the update
+    /// computed in place on the convolutions' outputs. `None` where [`conv2d_forward`] would
+    /// not take its fast path.
+    fn forward_fused(&self, h: &Tensor<4>, ctx: &GruContext, x: &Tensor<4>) -> Option<Tensor<4>> {
+        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
+        let padding = fast_padding(&self.convz, &hx)?;
+        let same = |c: &Conv2d| {
+            fast_padding(c, &hx) == Some(padding)
+                && c.kernel_size == self.convz.kernel_size
+                && c.dilation == self.convz.dilation
+                && c.bias.is_some()
+        };
+        if !(same(&self.convz) && same(&self.convr) && same(&self.convq)) {
+            return None;
+        }
+        let device = hx.device();
+        let [b, hidden, height, width] = h.dims();
+        let [_, channels, _, _] = hx.dims();
+        let [kh, kw] = self.convz.kernel_size;
+        let plane = height * width;
+        let weights = |c: &Conv2d| f32_vec(c.weight.val());
+        let biases = |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked above").val());
+        let shape = Nchw {
+            b,
+            c: channels,
+            h: height,
+            w: width,
+        };
+        let conv = |input: &[f32], weight: &[f32], bias: &[f32], co: usize| {
+            let (out, size) = conv2d_nchw(
+                input,
+                shape,
+                weight,
+                [co, kh, kw],
+                Some(bias),
+                padding,
+                self.convz.dilation,
+            );
+            debug_assert_eq!(size, [height, width], "a same-size convolution");
+            out
+        };
+        let h = f32_vec(h.clone());
+        let mut hx = f32_vec(hx);
+        let [cz, cr, cq] = ctx.clone().map(f32_vec);
+        let zr = conv(
+            &hx,
+            &[weights(&self.convz), weights(&self.convr)].concat(),
+            &[biases(&self.convz), biases(&self.convr)].concat(),
+            2 * hidden,
+        );
+        // z stays in the first half of `zr`; `r·h` replaces `h` in the input of convq.
+        let mut z = vec![0.0f32; b * hidden * plane];
+        let per_image = hidden * plane;
+        for n in 0..b {
+            let gates = &zr[n * 2 * per_image..(n + 1) * 2 * per_image];
+            let (zs, rs) = gates.split_at(per_image);
+            let at = n * per_image..(n + 1) * per_image;
+            let rh = &mut hx[n * channels * plane..][..per_image];
+            z[at.clone()]
+                .par_iter_mut()
+                .zip(zs)
+                .zip(&cz[at.clone()])
+                .for_each(|((z, &v), &c)| *z = sigmoid_f32(v + c));
+            rh.par_iter_mut()
+                .zip(rs)
+                .zip(&cr[at.clone()])
+                .zip(&h[at])
+                .for_each(|(((rh, &v), &c), &h)| *rh = sigmoid_f32(v + c) * h);
+        }
+        let mut q = conv(&hx, &weights(&self.convq), &biases(&self.convq), hidden);
+        q.par_iter_mut()
+            .zip(&cq)
+            .zip(&z)
+            .zip(&h)
+            .for_each(|(((q, &c), &z), &h)| *q = (1.0 - z) * h + z * (*q + c).tanh());
+        Some(Tensor::from_data(
+            TensorData::new(q, [b, hidden, height, width]),
+            &device,
+        ))
+    }
+}
+
+fn sigmoid_f32(v: f32) -> f32 {
+    1.0 / (1.0 + (-v).exp())
 }
 
 /// Upstream `DispHead(C, 256, 1)`: `conv2(relu(conv1(x)))`, both 3×3.
@@ -89,7 +185,7 @@ impl DispHead {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        self.conv2.forward(relu(self.conv1.forward(x)))
+        conv2d_forward(&self.conv2, relu(conv2d_forward(&self.conv1, x)))
     }
 }
 
@@ -117,9 +213,15 @@ impl BasicMotionEncoder {
     }
 
     pub fn forward(&self, disp: Tensor<4>, corr: Tensor<4>) -> Tensor<4> {
-        let cor = relu(self.convc2.forward(relu(self.convc1.forward(corr))));
-        let d = relu(self.convd2.forward(relu(self.convd1.forward(disp.clone()))));
-        let out = relu(self.conv.forward(Tensor::cat(vec![cor, d], 1)));
+        let cor = relu(conv2d_forward(
+            &self.convc2,
+            relu(conv2d_forward(&self.convc1, corr)),
+        ));
+        let d = relu(conv2d_forward(
+            &self.convd2,
+            relu(conv2d_forward(&self.convd1, disp.clone())),
+        ));
+        let out = relu(conv2d_forward(&self.conv, Tensor::cat(vec![cor, d], 1)));
         Tensor::cat(vec![out, disp], 1)
     }
 }
@@ -172,28 +274,33 @@ impl BasicMotionEncoderMix2 {
     /// `own` goes through the plain weights, `other` through the `*_mono` weights (for the mono
     /// instance upstream passes the mono branch as `own`).
     pub fn forward(&self, own: &Branch, other: &Branch) -> Tensor<4> {
-        let cor = relu(
-            self.convc2.forward(relu(
-                self.convc1
-                    .forward(Tensor::cat(vec![own.corr.clone(), own.flaw.clone()], 1)),
+        let cor = relu(conv2d_forward(
+            &self.convc2,
+            relu(conv2d_forward(
+                &self.convc1,
+                Tensor::cat(vec![own.corr.clone(), own.flaw.clone()], 1),
             )),
-        );
-        let cor_o = relu(
-            self.convc2_mono.forward(relu(
-                self.convc1_mono
-                    .forward(Tensor::cat(vec![other.corr.clone(), other.flaw.clone()], 1)),
+        ));
+        let cor_o = relu(conv2d_forward(
+            &self.convc2_mono,
+            relu(conv2d_forward(
+                &self.convc1_mono,
+                Tensor::cat(vec![other.corr.clone(), other.flaw.clone()], 1),
             )),
-        );
-        let d = relu(
-            self.convd2
-                .forward(relu(self.convd1.forward(own.disp.clone()))),
-        );
-        let d_o = relu(
-            self.convd2_mono
-                .forward(relu(self.convd1_mono.forward(other.disp.clone()))),
-        );
-        let out = relu(self.conv.forward(Tensor::cat(vec![cor, d], 1)));
-        let out_o = relu(self.conv_mono.forward(Tensor::cat(vec![cor_o, d_o], 1)));
+        ));
+        let d = relu(conv2d_forward(
+            &self.convd2,
+            relu(conv2d_forward(&self.convd1, own.disp.clone())),
+        ));
+        let d_o = relu(conv2d_forward(
+            &self.convd2_mono,
+            relu(conv2d_forward(&self.convd1_mono, other.disp.clone())),
+        ));
+        let out = relu(conv2d_forward(&self.conv, Tensor::cat(vec![cor, d], 1)));
+        let out_o = relu(conv2d_forward(
+            &self.conv_mono,
+            Tensor::cat(vec![cor_o, d_o], 1),
+        ));
         Tensor::cat(vec![out, own.disp.clone(), out_o, other.disp.clone()], 1)
     }
 }
@@ -269,7 +376,7 @@ impl BasicMultiUpdateBlock {
             self.encoder.forward(disp, corr)
         });
         let delta = self.disp_head.forward(net[0].clone());
-        let mask_feat = relu(self.mask_feat_4.0.forward(net[0].clone()));
+        let mask_feat = relu(conv2d_forward(&self.mask_feat_4.0, net[0].clone()));
         UpdateOut {
             net,
             mask_feat,
@@ -315,7 +422,7 @@ impl BasicMultiUpdateBlockMix2 {
             self.encoder.forward(own, other)
         });
         let delta = self.disp_head.forward(net[0].clone());
-        let mask_feat = relu(self.mask_feat_4.0.forward(net[0].clone()));
+        let mask_feat = relu(conv2d_forward(&self.mask_feat_4.0, net[0].clone()));
         UpdateOut {
             net,
             mask_feat,
@@ -463,17 +570,18 @@ pub fn iterate_traced(
             emit_block("update_block", &out, &mut emit);
             out
         } else {
-            let (warped_mono, warped_stereo) = span("mutual refinement (warp, scale/shift)", || {
-                if itr == n - 7 {
-                    let (aligned, params) = align_mono(disp_mono_4x.clone(), &disp);
-                    disp_mono_4x = aligned;
-                    scale_shift = params;
-                }
-                (
-                    disp_warp(features_right0.clone(), disp_mono_4x.clone()),
-                    disp_warp(features_right0.clone(), disp.clone()),
-                )
-            });
+            let (warped_mono, warped_stereo) =
+                span("mutual refinement (warp, scale/shift)", || {
+                    if itr == n - 7 {
+                        let (aligned, params) = align_mono(disp_mono_4x.clone(), &disp);
+                        disp_mono_4x = aligned;
+                        scale_shift = params;
+                    }
+                    (
+                        disp_warp(features_right0.clone(), disp_mono_4x.clone()),
+                        disp_warp(features_right0.clone(), disp.clone()),
+                    )
+                });
             emit("feat_warp", &warped_mono);
             let flaw_mono = warped_mono - features_left0.clone();
             emit("feat_warp", &warped_stereo);
