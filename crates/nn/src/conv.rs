@@ -6,7 +6,7 @@
 //! and re-lays out the weights at every call; on the ConvGRU's 3×3 convolutions that runs at
 //! about a third of the GEMM's speed (BENCHMARKS.md, "Where the time goes"). Everything this
 //! path does not cover (other devices, autodiff, strides, groups, `Same` padding) keeps burn's
-//! convolution, so [`conv2d`] is a drop-in for `Conv2d::forward`.
+//! convolution, so [`conv2d_forward`] is a drop-in for `Conv2d::forward`.
 
 use std::cell::Cell;
 
@@ -111,7 +111,7 @@ pub fn conv2d_nchw(
     let mut out = vec![0.0f32; b * co * oh * ow];
     let mut wide = Scratch::take(&WIDE, co * oh * wp);
     let mut padded = Scratch::take(&PADDED, ci * plane + span_w);
-    padded.fill(0.0);
+    padded[ci * plane..].fill(0.0);
     let rows_per_tile = (TILE_PIXELS / wp).max(1);
     for n in 0..b {
         let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
@@ -221,7 +221,8 @@ fn tap_weights(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
     out
 }
 
-/// Copies `image` (`[c, h, w]`) into the interior of `padded` (`[c, hp, wp]`, zero borders).
+/// Writes `image` (`[c, h, w]`) into the interior of `padded` (`[c, hp, wp]`) and zeros its
+/// borders: each element once (the buffer is reused, its old contents are garbage).
 fn pad_into(
     padded: &mut [f32],
     image: &[f32],
@@ -237,9 +238,14 @@ fn pad_into(
         .chunks_exact_mut(hp * wp)
         .zip(image.chunks_exact(h * w))
     {
-        for (y, row) in src.chunks_exact(w).enumerate() {
-            let start = (y + top) * wp + left;
-            dst[start..start + w].copy_from_slice(row);
+        let (above, rest) = dst.split_at_mut(top * wp);
+        let (inner, below) = rest.split_at_mut(h * wp);
+        above.fill(0.0);
+        below.fill(0.0);
+        for (d, s) in inner.chunks_exact_mut(wp).zip(src.chunks_exact(w)) {
+            d[..left].fill(0.0);
+            d[left..left + w].copy_from_slice(s);
+            d[left + w..].fill(0.0);
         }
     }
 }

@@ -9,11 +9,12 @@
 //! Shapes (F = DPT `features`, C = hidden dim, 128 upstream, 32 in the tiny fixture): every list
 //! is ordered `[1/4 (h×w), 1/8, 1/16]`.
 
-use crate::conv::conv2d_forward;
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{Device, Tensor};
+
+use crate::conv::conv2d_forward;
 
 use super::features::conv2d;
 

@@ -5,7 +5,6 @@
 
 #![allow(non_snake_case)]
 
-use crate::conv::conv2d_forward;
 use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, PaddingConfig2d};
@@ -15,6 +14,7 @@ use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Tensor};
 
 use crate::config::DptConfig;
+use crate::conv::conv2d_forward;
 use crate::monster::vit::VitFeatures;
 use crate::resize::resize_bilinear;
 

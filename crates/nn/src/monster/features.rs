@@ -11,12 +11,13 @@
 //! - stems → `[32×H/2, 48×H/4, 96×H/8, 192×H/16]`
 //! - `features[0] = cat(f4, stem_4)` → 96×h×w; matching features 96×h×w.
 
-use crate::conv::conv2d_forward;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::PaddingConfig2d;
 use burn::tensor::activation::{leaky_relu, relu};
 use burn::tensor::{Device, Tensor};
+
+use crate::conv::conv2d_forward;
 
 /// Slope of PyTorch's default `nn.LeakyReLU()`, used by `BasicConv`/`BasicConv_IN`.
 pub const LEAKY_SLOPE: f64 = 0.01;

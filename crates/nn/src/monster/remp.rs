@@ -5,13 +5,14 @@
 
 #![allow(non_snake_case)]
 
-use crate::conv::conv2d_forward;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d, Relu};
 use burn::tensor::activation::{leaky_relu, relu, sigmoid};
 use burn::tensor::module::adaptive_avg_pool2d;
 use burn::tensor::{Device, Tensor};
+
+use crate::conv::conv2d_forward;
 
 use super::warp::disp_warp;
 

@@ -68,10 +68,10 @@ impl ConvGru {
     /// `x_list` is concatenated along channels (upstream `*x_list`).
     pub fn forward(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
         let x = Tensor::cat(x_list, 1);
-        if let Some(h) = self.forward_fused(&h, ctx, &x) {
+        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
+        if let Some(h) = self.forward_fused(&h, ctx, &hx) {
             return h;
         }
-        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
         let z = sigmoid(conv2d_forward(&self.convz, hx.clone()) + ctx[0].clone());
         let r = sigmoid(conv2d_forward(&self.convr, hx) + ctx[1].clone());
         let q = tanh(
@@ -86,11 +86,11 @@ impl ConvGru {
     /// and `convr` as one convolution (their weights stacked), the gates, `r·h` and the update
     /// computed in place on the convolutions' outputs. `None` where [`conv2d_forward`] would
     /// not take its fast path.
-    fn forward_fused(&self, h: &Tensor<4>, ctx: &GruContext, x: &Tensor<4>) -> Option<Tensor<4>> {
-        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
-        let padding = fast_padding(&self.convz, &hx)?;
+    /// `hx` is `cat([h, x])`.
+    fn forward_fused(&self, h: &Tensor<4>, ctx: &GruContext, hx: &Tensor<4>) -> Option<Tensor<4>> {
+        let padding = fast_padding(&self.convz, hx)?;
         let same = |c: &Conv2d| {
-            fast_padding(c, &hx) == Some(padding)
+            fast_padding(c, hx) == Some(padding)
                 && c.kernel_size == self.convz.kernel_size
                 && c.dilation == self.convz.dilation
                 && c.bias.is_some()
@@ -125,7 +125,7 @@ impl ConvGru {
             out
         };
         let h = f32_vec(h.clone());
-        let mut hx = f32_vec(hx);
+        let mut hx = f32_vec(hx.clone());
         let [cz, cr, cq] = ctx.clone().map(f32_vec);
         let zr = conv(
             &hx,
@@ -438,15 +438,15 @@ impl BasicMultiUpdateBlockMix2 {
 use burn::nn::conv::ConvTranspose2d;
 
 use super::geometry::{GeoEncodingVolume, GEO};
+use super::remp::Remp;
+use super::scale_shift::align_mono;
+use super::upsample::{upsample_disp, Conv2x};
+use super::warp::disp_warp;
 use crate::profile::span;
 
 /// Profile groups of the refinement loop.
 const GRU: &str = "convgru updates";
 const UPSAMPLING: &str = "upsampling";
-use super::remp::Remp;
-use super::scale_shift::align_mono;
-use super::upsample::{upsample_disp, Conv2x};
-use super::warp::disp_warp;
 
 /// The modules the loop uses (borrowed from the assembled model; their state-dict prefixes are
 /// `update_block`, `update_block_mix_stereo`, `update_block_mix_mono`, `spx_2_gru`,
