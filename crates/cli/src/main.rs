@@ -99,7 +99,18 @@ enum Command {
     Train(train::TrainArgs),
 }
 
+/// `mi_option_purge_delay` of mimalloc's `mi_option_e` (`mimalloc.h`).
+const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
+
+/// Milliseconds a freed page waits before it goes back to the kernel. mimalloc's default (10 ms)
+/// returns the pages of a network's tensors between two layers and faults them in again, zeroed,
+/// for the next (a tenth of a MonSter++ pass, BENCHMARKS.md); a few seconds keep them for the
+/// whole pass and still hand them back once a stage is done with them.
+const PURGE_DELAY_MS: std::ffi::c_long = 5_000;
+
 fn main() -> ExitCode {
+    // SAFETY: sets a plain integer option of the allocator, before any thread is started.
+    unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, PURGE_DELAY_MS) };
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

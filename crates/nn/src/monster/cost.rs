@@ -23,6 +23,8 @@ use burn::tensor::activation::{leaky_relu, sigmoid, softmax};
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
+use crate::conv::{conv2d_forward, conv2d_fused, conv_transpose2d_forward, Activation};
+
 use super::features::{
     conv2d, conv_in_block, conv_in_block_forward, instance_norm, BasicConvIn, ConvInBlock,
     LEAKY_SLOPE,
@@ -111,7 +113,12 @@ impl BasicConv2d {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        leaky_relu(self.bn.forward(self.conv.forward(x)), LEAKY_SLOPE)
+        conv2d_fused(
+            &self.conv,
+            Some(&self.bn),
+            Activation::LeakyRelu(LEAKY_SLOPE as f32),
+            x,
+        )
     }
 }
 
@@ -201,7 +208,7 @@ impl FeatureAtt {
 
     /// `cv` `[B, cv_c, D, h, w]`, `feat` `[B, feat_c, h, w]` → `[B, cv_c, D, h, w]`.
     pub fn forward(&self, cv: Tensor<5>, feat: Tensor<4>) -> Tensor<5> {
-        let att = self.feat_att.1.forward(self.feat_att.0.forward(feat));
+        let att = conv2d_forward(&self.feat_att.1, self.feat_att.0.forward(feat));
         let att: Tensor<5> = sigmoid(att).unsqueeze_dim(2);
         cv * att
     }
@@ -387,7 +394,10 @@ impl BasicDeconvIn {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        leaky_relu(instance_norm(self.conv.forward(x)), LEAKY_SLOPE)
+        leaky_relu(
+            instance_norm(conv_transpose2d_forward(&self.conv, x)),
+            LEAKY_SLOPE,
+        )
     }
 }
 
@@ -440,6 +450,6 @@ impl SpxHead {
     pub fn forward(&self, features0: Tensor<4>, stem_2x: Tensor<4>) -> Tensor<4> {
         let x = conv_in_block_forward(&self.spx_4, features0);
         let x = self.spx_2.forward(x, stem_2x);
-        softmax(self.spx[0].forward(x), 1)
+        softmax(conv_transpose2d_forward(&self.spx[0], x), 1)
     }
 }

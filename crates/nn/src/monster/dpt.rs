@@ -14,7 +14,10 @@ use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Tensor};
 
 use crate::config::DptConfig;
-use crate::conv::conv2d_forward;
+use crate::conv::{
+    conv2d_forward, conv2d_fused, conv2d_with, conv_transpose2d_with, on_cpu_inference, Activation,
+    Geometry, TransposeGeometry,
+};
 use crate::monster::vit::VitFeatures;
 use crate::resize::resize_bilinear;
 
@@ -66,20 +69,36 @@ impl ResizeLayer {
     /// Applies the layer.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let (s, p) = (self.stride, self.padding);
-        if self.transposed {
-            conv_transpose2d(
+        let [_, _, k, _] = self.weight.dims();
+        let fast = on_cpu_inference(&x);
+        let (weight, bias) = (self.weight.val(), Some(self.bias.val()));
+        match (self.transposed, fast) {
+            (true, true) => {
+                let geometry = TransposeGeometry {
+                    kernel: [k, k],
+                    stride: [s, s],
+                    padding: [p, p],
+                    dilation: [1, 1],
+                    padding_out: [0, 0],
+                };
+                conv_transpose2d_with(x, weight, bias, geometry, None, Activation::Identity)
+            }
+            (false, true) => {
+                let geometry = Geometry {
+                    kernel: [k, k],
+                    stride: [s, s],
+                    padding: [p; 4],
+                    dilation: [1, 1],
+                };
+                conv2d_with(x, weight, bias, geometry, None, Activation::Identity)
+            }
+            (true, false) => conv_transpose2d(
                 x,
-                self.weight.val(),
-                Some(self.bias.val()),
+                weight,
+                bias,
                 ConvTransposeOptions::new([s, s], [p, p], [0, 0], [1, 1], 1),
-            )
-        } else {
-            conv2d(
-                x,
-                self.weight.val(),
-                Some(self.bias.val()),
-                ConvOptions::new([s, s], [p, p], [1, 1], 1),
-            )
+            ),
+            (false, false) => conv2d(x, weight, bias, ConvOptions::new([s, s], [p, p], [1, 1], 1)),
         }
     }
 }
@@ -105,7 +124,7 @@ impl ResidualConvUnit {
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let out = conv2d_forward(
             &self.conv2,
-            relu(conv2d_forward(&self.conv1, relu(x.clone()))),
+            conv2d_fused(&self.conv1, None, Activation::Relu, relu(x.clone())),
         );
         out + x
     }
@@ -283,14 +302,18 @@ impl DptHead {
         let out = conv2d_forward(oc1, p1);
         let (gh, gw) = feats.grid;
         let out = resize_bilinear(out, [gh * 14, gw * 14], true);
-        let out = relu(conv2d_forward(
+        let out = conv2d_fused(
             oc2[0].as_ref().expect("output_conv2.0"),
+            None,
+            Activation::Relu,
             out,
-        ));
-        let out = relu(conv2d_forward(
+        );
+        let out = conv2d_fused(
             oc2[2].as_ref().expect("output_conv2.2"),
+            None,
+            Activation::Relu,
             out,
-        ));
+        );
         // MonSter: F.relu (a no-op after the last ReLU) then resize to the input size.
         resize_bilinear(relu(out), out_size, false)
     }

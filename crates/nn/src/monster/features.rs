@@ -17,7 +17,7 @@ use burn::nn::PaddingConfig2d;
 use burn::tensor::activation::{leaky_relu, relu};
 use burn::tensor::{Device, Tensor};
 
-use crate::conv::conv2d_forward;
+use crate::conv::{conv2d_forward, conv_transpose2d_forward};
 
 /// Slope of PyTorch's default `nn.LeakyReLU()`, used by `BasicConv`/`BasicConv_IN`.
 pub const LEAKY_SLOPE: f64 = 0.01;
@@ -78,7 +78,7 @@ impl BasicConvIn {
 
     /// `[B, c_in, H, W]` → `[B, c_out, H/stride, W/stride]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        leaky_relu(instance_norm(self.conv.forward(x)), LEAKY_SLOPE)
+        leaky_relu(instance_norm(conv2d_forward(&self.conv, x)), LEAKY_SLOPE)
     }
 }
 
@@ -151,13 +151,13 @@ impl FeatTransfer {
     pub fn forward(&self, paths: [Tensor<4>; 4]) -> [Tensor<4>; 4] {
         let [p4, p8, p16, p32] = paths;
         let f32_ = conv_in_relu_forward(&self.conv32x, p32);
-        let up = self.conv_up_32x.forward(f32_.clone());
+        let up = conv_transpose2d_forward(&self.conv_up_32x, f32_.clone());
         let f16 = conv_in_relu_forward(&self.conv16x, Tensor::cat(vec![p16.clone(), up], 1))
             + conv2d_forward(&self.res_16x, p16);
-        let up = self.conv_up_16x.forward(f16.clone());
+        let up = conv_transpose2d_forward(&self.conv_up_16x, f16.clone());
         let f8 = conv_in_relu_forward(&self.conv8x, Tensor::cat(vec![p8.clone(), up], 1))
             + conv2d_forward(&self.res_8x, p8);
-        let up = self.conv_up_8x.forward(f8.clone());
+        let up = conv_transpose2d_forward(&self.conv_up_8x, f8.clone());
         let f4 = conv_in_relu_forward(&self.conv4x, Tensor::cat(vec![p4.clone(), up], 1))
             + conv2d_forward(&self.res_4x, p4);
         [f4, f8, f16, f32_]

@@ -10,7 +10,10 @@
 //! Output channel order (B×162×h×w for r=4, 2 levels, 8 groups): per level `[geo: c·(2r+1)+k,
 //! corr: k]`, level 0 then level 1.
 
-use burn::tensor::{Int, Tensor};
+use burn::tensor::{Int, Tensor, TensorData};
+use rayon::prelude::*;
+
+use crate::conv::{f32_vec, on_cpu_inference};
 
 /// Profile group of the volume's construction and its lookups.
 pub const GEO: &str = "geo encoding lookup";
@@ -24,6 +27,8 @@ pub struct GeoEncodingVolume {
     corr: Vec<Tensor<2>>,
     radius: usize,
     dims: [usize; 3],
+    /// The same pyramids as plain values on the CPU inference device, for [`lookup_plain`].
+    plain: Option<Vec<(Vec<f32>, Vec<f32>)>>,
 }
 
 impl GeoEncodingVolume {
@@ -37,6 +42,7 @@ impl GeoEncodingVolume {
         num_levels: usize,
     ) -> Self {
         let [b, c, h, w1] = match_left.dims();
+        let cpu = on_cpu_inference(&match_left);
         let w2 = match_right.dims()[3];
         // corr[b, y, x1, x2] = Σ_c L[b, c, y, x1]·R[b, c, y, x2]
         let l = match_left.permute([0, 2, 3, 1]).reshape([b * h, w1, c]);
@@ -71,11 +77,19 @@ impl GeoEncodingVolume {
             geo_pyr.push(geo.clone());
             corr_pyr.push(corr.clone());
         }
+        let plain = cpu.then(|| {
+            geo_pyr
+                .iter()
+                .zip(&corr_pyr)
+                .map(|(g, c)| (f32_vec(g.clone()), f32_vec(c.clone())))
+                .collect()
+        });
         Self {
             geo: geo_pyr,
             corr: corr_pyr,
             radius,
             dims: [b, h, w1],
+            plain,
         }
     }
 
@@ -90,6 +104,9 @@ impl GeoEncodingVolume {
     pub fn lookup(&self, disp: &Tensor<4>) -> Tensor<4> {
         let [b, h, w] = self.dims;
         assert_eq!(disp.dims(), [b, 1, h, w], "disparity shape");
+        if self.plain.is_some() && on_cpu_inference(disp) {
+            return self.lookup_plain(disp);
+        }
         let device = disp.device();
         let taps = 2 * self.radius + 1;
         let n = b * h * w;
@@ -122,6 +139,80 @@ impl GeoEncodingVolume {
             .reshape([b, h, w, c])
             .permute([0, 3, 1, 2])
     }
+}
+
+impl GeoEncodingVolume {
+    /// [`lookup`](Self::lookup) on the plain pyramids: per image row, every tap of every pixel
+    /// computed once and written straight into the NCHW output, with the same floating-point
+    /// operations as the tensor path (so the same values).
+    fn lookup_plain(&self, disp: &Tensor<4>) -> Tensor<4> {
+        let [b, h, w] = self.dims;
+        let levels = self.plain.as_ref().expect("checked by the caller");
+        let disp_values = f32_vec(disp.clone());
+        let taps = 2 * self.radius + 1;
+        let r = self.radius as f32;
+        let c = self.out_channels();
+        let plane = h * w;
+        let mut out = vec![0.0f32; b * c * plane];
+        // One task per image row: `c` runs of `w` values, at stride `plane`, in its own rows.
+        let rows: Vec<Vec<f32>> = (0..b * h)
+            .into_par_iter()
+            .map(|row| {
+                let mut values = vec![0.0f32; c * w];
+                let mut channel = 0;
+                for (i, (geo, corr)) in levels.iter().enumerate() {
+                    let scale = (1u64 << i) as f32;
+                    let n = b * h * w;
+                    let (g, d) = (self.geo[i].dims()[1], self.geo[i].dims()[2]);
+                    let l2 = corr.len() / n;
+                    for x in 0..w {
+                        let p = row * w + x;
+                        let disp = disp_values[p];
+                        let voxels = &geo[p * g * d..(p + 1) * g * d];
+                        for k in 0..taps {
+                            let dx = k as f32 - r;
+                            let (i0, w0, i1, w1) = linear_tap(disp / scale + dx, d);
+                            for gi in 0..g {
+                                let v = &voxels[gi * d..(gi + 1) * d];
+                                values[(channel + gi * taps + k) * w + x] = v[i0] * w0 + v[i1] * w1;
+                            }
+                            let pos = x as f32 / scale - disp / scale + dx;
+                            let (i0, w0, i1, w1) = linear_tap(pos, l2);
+                            let line = &corr[p * l2..(p + 1) * l2];
+                            values[(channel + g * taps + k) * w + x] =
+                                line[i0] * w0 + line[i1] * w1;
+                        }
+                    }
+                    channel += (g + 1) * taps;
+                }
+                values
+            })
+            .collect();
+        for (row, values) in rows.iter().enumerate() {
+            let (n, y) = (row / h, row % h);
+            for (ch, run) in values.chunks_exact(w).enumerate() {
+                out[(n * c + ch) * plane + y * w..][..w].copy_from_slice(run);
+            }
+        }
+        Tensor::from_data(TensorData::new(out, [b, c, h, w]), &disp.device())
+    }
+}
+
+/// [`linear_taps`] for one position: `(i0, w0, i1, w1)`.
+fn linear_tap(pos: f32, len: usize) -> (usize, f32, usize, f32) {
+    let f0 = pos.floor();
+    let frac = pos - f0;
+    let f1 = f0 + 1.0;
+    let max = len as f32 - 1.0;
+    let inside = |f: f32| if (0.0..=max).contains(&f) { 1.0 } else { 0.0 };
+    let w0 = (-frac + 1.0) * inside(f0);
+    let w1 = frac * inside(f1);
+    (
+        f0.clamp(0.0, max) as usize,
+        w0,
+        f1.clamp(0.0, max) as usize,
+        w1,
+    )
 }
 
 /// Indices and weights of 1-D linear interpolation with zeros outside `[0, len-1]`:

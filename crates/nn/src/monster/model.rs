@@ -60,7 +60,7 @@ use super::vit::{normalize_image, DinoVisionTransformer};
 /// Profile group of the stereo feature stems and the GRU context.
 const STEMS: &str = "feature stems + context";
 use crate::config::MonsterConfig;
-use crate::conv::conv2d_forward;
+use crate::conv::{conv2d_forward, conv_transpose2d_forward};
 use crate::profile::span;
 use crate::resize::resize_bilinear;
 use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
@@ -292,7 +292,7 @@ impl Monster {
         let init_disp_up = (!test_mode).then(|| {
             let x = conv_in_block_forward(&self.spx_4, features_left[0].clone());
             let x = self.spx_2.forward(x, stem_2x.clone());
-            let spx_pred = softmax(self.spx[0].forward(x), 1);
+            let spx_pred = softmax(conv_transpose2d_forward(&self.spx[0], x), 1);
             context_upsample(init_disp.clone().mul_scalar(4.0), spx_pred)
         });
 

@@ -12,7 +12,7 @@ use burn::tensor::activation::{leaky_relu, relu, sigmoid};
 use burn::tensor::module::adaptive_avg_pool2d;
 use burn::tensor::{Device, Tensor};
 
-use crate::conv::conv2d_forward;
+use crate::conv::{conv2d_forward, conv2d_fused, conv_transpose2d_fused, Activation};
 
 use super::warp::disp_warp;
 
@@ -45,7 +45,7 @@ fn conv_bn_lrelu(c_in: usize, c_out: usize, device: &Device) -> (Conv2d, BatchNo
 }
 
 fn apply_conv_bn_lrelu(m: &(Conv2d, BatchNorm), x: Tensor<4>) -> Tensor<4> {
-    leaky_relu(m.1.forward(conv2d_forward(&m.0, x)), 0.2)
+    conv2d_fused(&m.0, Some(&m.1), Activation::LeakyRelu(0.2), x)
 }
 
 /// Upstream `BasicConv_now` (2-D): conv (no bias) + BatchNorm2d + ReLU.
@@ -71,7 +71,7 @@ impl BasicConvNow {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(self.bn.forward(self.conv.forward(x)))
+        conv2d_fused(&self.conv, Some(&self.bn), Activation::Relu, x)
     }
 }
 
@@ -95,7 +95,7 @@ impl BasicDeconvNow {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(self.bn.forward(self.conv.forward(x)))
+        conv_transpose2d_fused(&self.conv, Some(&self.bn), Activation::Relu, x)
     }
 }
 

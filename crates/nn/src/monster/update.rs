@@ -17,7 +17,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use rayon::prelude::*;
 
-use crate::conv::{conv2d_forward, conv2d_nchw, f32_vec, fast_padding, Nchw};
+use crate::conv::{conv2d_forward, conv2d_nchw, f32_vec, geometry, Epilogue, Nchw};
 use crate::resize::resize_bilinear;
 
 fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
@@ -88,20 +88,15 @@ impl ConvGru {
     /// not take its fast path.
     /// `hx` is `cat([h, x])`.
     fn forward_fused(&self, h: &Tensor<4>, ctx: &GruContext, hx: &Tensor<4>) -> Option<Tensor<4>> {
-        let padding = fast_padding(&self.convz, hx)?;
-        let same = |c: &Conv2d| {
-            fast_padding(c, hx) == Some(padding)
-                && c.kernel_size == self.convz.kernel_size
-                && c.dilation == self.convz.dilation
-                && c.bias.is_some()
-        };
-        if !(same(&self.convz) && same(&self.convr) && same(&self.convq)) {
+        let shared = geometry(&self.convz, hx)?;
+        let same = |c: &Conv2d| geometry(c, hx) == Some(shared) && c.bias.is_some();
+        if shared.stride != [1, 1] || !(same(&self.convz) && same(&self.convr) && same(&self.convq))
+        {
             return None;
         }
         let device = hx.device();
         let [b, hidden, height, width] = h.dims();
         let [_, channels, _, _] = hx.dims();
-        let [kh, kw] = self.convz.kernel_size;
         let plane = height * width;
         let weights = |c: &Conv2d| f32_vec(c.weight.val());
         let biases = |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked above").val());
@@ -112,15 +107,8 @@ impl ConvGru {
             w: width,
         };
         let conv = |input: &[f32], weight: &[f32], bias: &[f32], co: usize| {
-            let (out, size) = conv2d_nchw(
-                input,
-                shape,
-                weight,
-                [co, kh, kw],
-                Some(bias),
-                padding,
-                self.convz.dilation,
-            );
+            let (out, size) =
+                conv2d_nchw(input, shape, weight, co, shared, Epilogue::bias(Some(bias)));
             debug_assert_eq!(size, [height, width], "a same-size convolution");
             out
         };

@@ -5,10 +5,12 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
-use burn::tensor::activation::{leaky_relu, softmax};
+use burn::tensor::activation::softmax;
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor};
+
+use crate::conv::{conv2d_fused, conv_transpose2d_forward, conv_transpose2d_fused, Activation};
 
 /// Upstream `BasicConv` (2-D, no deconv): Conv2d (no bias) + BatchNorm2d (eval: running stats)
 /// + LeakyReLU(0.01). Keys `conv.weight`, `bn.{weight,bias,running_mean,running_var}`.
@@ -31,7 +33,7 @@ impl BasicConv {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        leaky_relu(self.bn.forward(self.conv.forward(x)), 0.01)
+        conv2d_fused(&self.conv, Some(&self.bn), Activation::LeakyRelu(0.01), x)
     }
 }
 
@@ -55,7 +57,7 @@ impl BasicDeconv {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        leaky_relu(self.bn.forward(self.conv.forward(x)), 0.01)
+        conv_transpose2d_fused(&self.conv, Some(&self.bn), Activation::LeakyRelu(0.01), x)
     }
 }
 
@@ -146,7 +148,7 @@ pub fn upsample_disp(
     stem_2x: Tensor<4>,
 ) -> Tensor<4> {
     let xspx = spx_2_gru.forward(mask_feat_4, stem_2x);
-    let spx_pred = softmax(spx_gru.forward(xspx), 1);
+    let spx_pred = softmax(conv_transpose2d_forward(spx_gru, xspx), 1);
     context_upsample(disp.mul_scalar(4.0), spx_pred)
 }
 

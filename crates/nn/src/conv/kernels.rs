@@ -1,0 +1,494 @@
+//! The CPU kernels on plain NCHW `f32` slices: convolution by tap GEMMs (stride 1) or by an
+//! unfolded input (strides, thin inputs), transposed convolution by one GEMM plus a scatter,
+//! each ending in a per-channel affine map and an activation applied while the output is
+//! written (bias, a folded BatchNorm, ReLU/LeakyReLU).
+
+use rayon::prelude::*;
+
+use super::scratch::{Scratch, COLUMNS, PADDED, WIDE};
+
+/// Output pixels per tap-GEMM call: a few rows of the padded image, so that the output tile
+/// stays in the cache while the taps accumulate into it.
+const TILE_PIXELS: usize = 2048;
+
+/// Floats of unfolded input per GEMM call (1 MiB): a tile that stays in the L2 cache.
+const COLUMN_FLOATS: usize = 1 << 18;
+
+/// Input channels from which a stride-1 convolution runs as tap GEMMs; thinner inputs make
+/// GEMMs too thin to pay, so they are unfolded (`k = c·kh·kw` instead of `c`).
+pub const MIN_TAP_CHANNELS: usize = 16;
+
+/// Shape of an NCHW tensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Nchw {
+    pub b: usize,
+    pub c: usize,
+    pub h: usize,
+    pub w: usize,
+}
+
+/// Kernel size, stride, zero padding `[top, left, bottom, right]` and dilation of a convolution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Geometry {
+    pub kernel: [usize; 2],
+    pub stride: [usize; 2],
+    pub padding: [usize; 4],
+    pub dilation: [usize; 2],
+}
+
+impl Geometry {
+    /// Output `[oh, ow]` for an `h × w` input.
+    pub fn output(&self, [h, w]: [usize; 2]) -> [usize; 2] {
+        let [top, left, bottom, right] = self.padding;
+        let span = |k: usize, d: usize| d * (k - 1) + 1;
+        let (hp, wp) = (h + top + bottom, w + left + right);
+        let (kh, kw) = (
+            span(self.kernel[0], self.dilation[0]),
+            span(self.kernel[1], self.dilation[1]),
+        );
+        assert!(
+            hp >= kh && wp >= kw,
+            "convolution: kernel larger than the padded input"
+        );
+        [
+            (hp - kh) / self.stride[0] + 1,
+            (wp - kw) / self.stride[1] + 1,
+        ]
+    }
+}
+
+/// The activation that ends a fused layer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Activation {
+    Identity,
+    Relu,
+    LeakyRelu(f32),
+}
+
+impl Activation {
+    #[inline]
+    pub fn apply(self, v: f32) -> f32 {
+        match self {
+            Activation::Identity => v,
+            Activation::Relu => v.max(0.0),
+            Activation::LeakyRelu(slope) => {
+                if v >= 0.0 {
+                    v
+                } else {
+                    v * slope
+                }
+            }
+        }
+    }
+}
+
+/// `out[c] = act(scale[c]·acc[c] + shift[c])`, per output channel (`None`: 1 and 0).
+#[derive(Debug, Clone, Copy)]
+pub struct Epilogue<'a> {
+    pub scale: Option<&'a [f32]>,
+    pub shift: Option<&'a [f32]>,
+    pub act: Activation,
+}
+
+impl<'a> Epilogue<'a> {
+    /// A bias and nothing else.
+    pub fn bias(bias: Option<&'a [f32]>) -> Self {
+        Epilogue {
+            scale: None,
+            shift: bias,
+            act: Activation::Identity,
+        }
+    }
+
+    #[inline]
+    pub(super) fn channel(&self, c: usize) -> (f32, f32) {
+        (
+            self.scale.map_or(1.0, |s| s[c]),
+            self.shift.map_or(0.0, |s| s[c]),
+        )
+    }
+
+    /// Applies the map in place to one image `[co, plane]`.
+    fn apply(&self, image: &mut [f32], plane: usize) {
+        if self.scale.is_none() && self.shift.is_none() && self.act == Activation::Identity {
+            return;
+        }
+        image
+            .par_chunks_mut(plane)
+            .enumerate()
+            .for_each(|(c, values)| {
+                let (scale, shift) = self.channel(c);
+                for v in values {
+                    *v = self.act.apply(*v * scale + shift);
+                }
+            });
+    }
+}
+
+/// Convolution of `input` (`shape`, NCHW) with `weight` (`[co, ci, kh, kw]`, row-major), then
+/// `epilogue`. Returns the output (`[b, co, oh, ow]`) and `[oh, ow]`.
+pub fn conv2d_nchw(
+    input: &[f32],
+    shape: Nchw,
+    weight: &[f32],
+    co: usize,
+    geometry: Geometry,
+    epilogue: Epilogue<'_>,
+) -> (Vec<f32>, [usize; 2]) {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    assert_eq!(input.len(), b * ci * h * w, "conv2d_nchw: input size");
+    assert_eq!(weight.len(), co * ci * kh * kw, "conv2d_nchw: weight size");
+    let [oh, ow] = geometry.output([h, w]);
+    let mut out = vec![0.0f32; b * co * oh * ow];
+    let plain_3x3 = geometry.kernel == [3, 3] && geometry.dilation == [1, 1];
+    if plain_3x3 && geometry.stride == [1, 1] && ci >= MIN_TAP_CHANNELS && co >= MIN_TAP_CHANNELS {
+        super::winograd::conv3x3(
+            input,
+            shape,
+            weight,
+            co,
+            geometry.padding,
+            epilogue,
+            &mut out,
+        );
+    } else if geometry.stride == [1, 1] && ci >= MIN_TAP_CHANNELS {
+        conv_taps(input, shape, weight, co, geometry, epilogue, &mut out);
+    } else {
+        conv_unfolded(input, shape, weight, co, geometry, &mut out);
+        for image in out.chunks_exact_mut(co * oh * ow) {
+            epilogue.apply(image, oh * ow);
+        }
+    }
+    (out, [oh, ow])
+}
+
+/// Stride 1: one GEMM per kernel tap. Each output row is computed over the whole padded width
+/// `wp`; for tap `(i, j)` the input it reads is the padded image shifted by `i·dh·wp + j·dw`,
+/// a plain strided matrix `[ci, oh·wp]` (row stride `hp·wp`). The `wp − ow` extra columns of
+/// each row are discarded when the epilogue writes `out`.
+fn conv_taps(
+    input: &[f32],
+    shape: Nchw,
+    weight: &[f32],
+    co: usize,
+    geometry: Geometry,
+    epilogue: Epilogue<'_>,
+    out: &mut [f32],
+) {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    let [top, left, bottom, right] = geometry.padding;
+    let [dh, dw] = geometry.dilation;
+    let (hp, wp) = (h + top + bottom, w + left + right);
+    let [oh, ow] = geometry.output([h, w]);
+    let span_w = dw * (kw - 1);
+    // The taps' shifted views of the last channel read up to `span_w` values past the image
+    // (only for the discarded columns): keep them inside the buffer.
+    let plane = hp * wp;
+    let taps = tap_weights(weight, co, ci, kh * kw);
+    let mut wide = Scratch::take(&WIDE, co * oh * wp);
+    let mut padded = Scratch::take(&PADDED, ci * plane + span_w);
+    padded[ci * plane..].fill(0.0);
+    let rows_per_tile = (TILE_PIXELS / wp).max(1);
+    for n in 0..b {
+        let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
+        pad_into(&mut padded, image, [ci, h, w], [top, left], [hp, wp]);
+        for r0 in (0..oh).step_by(rows_per_tile) {
+            let rows = rows_per_tile.min(oh - r0);
+            for (tap, tap_weight) in taps.chunks_exact(co * ci).enumerate() {
+                let offset = (tap / kw) * dh * wp + (tap % kw) * dw + r0 * wp;
+                // SAFETY: dst is `co × rows·wp` at row stride `oh·wp` inside `wide`; lhs is the
+                // `co × ci` tap matrix; rhs is `ci × rows·wp` at row stride `plane`, whose last
+                // element, `(ci−1)·plane + offset + rows·wp − 1 ≤ ci·plane + span_w − 1`, is
+                // inside `padded`.
+                unsafe {
+                    gemm::gemm(
+                        co,
+                        rows * wp,
+                        ci,
+                        wide.as_mut_ptr().add(r0 * wp),
+                        1,
+                        (oh * wp) as isize,
+                        tap > 0,
+                        tap_weight.as_ptr(),
+                        1,
+                        ci as isize,
+                        padded.as_ptr().add(offset),
+                        1,
+                        plane as isize,
+                        1.0,
+                        1.0,
+                        false,
+                        false,
+                        false,
+                        gemm::Parallelism::Rayon(0),
+                    );
+                }
+            }
+        }
+        let dst = &mut out[n * co * oh * ow..(n + 1) * co * oh * ow];
+        dst.par_chunks_exact_mut(oh * ow)
+            .zip(wide.par_chunks_exact(oh * wp))
+            .enumerate()
+            .for_each(|(c, (dst_plane, src_plane))| {
+                let (scale, shift) = epilogue.channel(c);
+                for (d, s) in dst_plane
+                    .chunks_exact_mut(ow)
+                    .zip(src_plane.chunks_exact(wp))
+                {
+                    for (d, s) in d.iter_mut().zip(&s[..ow]) {
+                        *d = epilogue.act.apply(s * scale + shift);
+                    }
+                }
+            });
+    }
+    wide.give_back(&WIDE);
+    padded.give_back(&PADDED);
+}
+
+/// Any stride: the input is unfolded a band of output rows at a time into `[ci·kh·kw, pixels]`
+/// (im2col), then one GEMM with the weight as it is stored (`[co, ci·kh·kw]`) writes the band.
+fn conv_unfolded(
+    input: &[f32],
+    shape: Nchw,
+    weight: &[f32],
+    co: usize,
+    geometry: Geometry,
+    out: &mut [f32],
+) {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    let [top, left, _, _] = geometry.padding;
+    let [sh, sw] = geometry.stride;
+    let [dh, dw] = geometry.dilation;
+    let [oh, ow] = geometry.output([h, w]);
+    let k = ci * kh * kw;
+    let rows_per_band = (COLUMN_FLOATS / (k * ow)).clamp(1, oh);
+    let mut columns = Scratch::take(&COLUMNS, k * rows_per_band * ow);
+    for n in 0..b {
+        let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
+        for r0 in (0..oh).step_by(rows_per_band) {
+            let rows = rows_per_band.min(oh - r0);
+            let pixels = rows * ow;
+            columns[..k * pixels]
+                .par_chunks_exact_mut(pixels)
+                .enumerate()
+                .for_each(|(row, dst)| {
+                    let (c, i, j) = (row / (kh * kw), (row / kw) % kh, row % kw);
+                    let plane = &image[c * h * w..(c + 1) * h * w];
+                    // Output columns whose input column `ox·sw + j·dw − left` is inside the image.
+                    let x0 = (left.saturating_sub(j * dw)).div_ceil(sw).min(ow);
+                    let x1 = ((w + left).saturating_sub(j * dw))
+                        .div_ceil(sw)
+                        .clamp(x0, ow);
+                    for (r, d) in dst.chunks_exact_mut(ow).enumerate() {
+                        let y = ((r0 + r) * sh + i * dh) as isize - top as isize;
+                        if y < 0 || y >= h as isize {
+                            d.fill(0.0);
+                            continue;
+                        }
+                        let src = &plane[y as usize * w..][..w];
+                        d[..x0].fill(0.0);
+                        d[x1..].fill(0.0);
+                        for (ox, d) in (x0..x1).zip(&mut d[x0..x1]) {
+                            *d = src[ox * sw + j * dw - left];
+                        }
+                    }
+                });
+            // SAFETY: dst is `co × pixels` at row stride `oh·ow` inside this image's output;
+            // lhs is `[co, k]` row-major; rhs is `[k, pixels]` row-major inside `columns`.
+            unsafe {
+                gemm::gemm(
+                    co,
+                    pixels,
+                    k,
+                    out.as_mut_ptr().add(n * co * oh * ow + r0 * ow),
+                    1,
+                    (oh * ow) as isize,
+                    false,
+                    weight.as_ptr(),
+                    1,
+                    k as isize,
+                    columns.as_ptr(),
+                    1,
+                    pixels as isize,
+                    0.0,
+                    1.0,
+                    false,
+                    false,
+                    false,
+                    gemm::Parallelism::Rayon(0),
+                );
+            }
+        }
+    }
+    columns.give_back(&COLUMNS);
+}
+
+/// Kernel size, stride, padding `[ph, pw]` (removed from both sides), dilation and extra
+/// output padding of a transposed convolution (PyTorch's `ConvTranspose2d` arguments).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TransposeGeometry {
+    pub kernel: [usize; 2],
+    pub stride: [usize; 2],
+    pub padding: [usize; 2],
+    pub dilation: [usize; 2],
+    pub padding_out: [usize; 2],
+}
+
+impl TransposeGeometry {
+    /// Output `[oh, ow]` for an `h × w` input: `(h−1)·s − 2p + d·(k−1) + p_out + 1`.
+    pub fn output(&self, [h, w]: [usize; 2]) -> [usize; 2] {
+        let size = |n: usize, a: usize| {
+            ((n - 1) * self.stride[a]
+                + self.dilation[a] * (self.kernel[a] - 1)
+                + self.padding_out[a]
+                + 1)
+            .checked_sub(2 * self.padding[a])
+            .expect("transposed convolution: padding larger than the output")
+        };
+        [size(h, 0), size(w, 1)]
+    }
+}
+
+/// Transposed convolution of `input` (`shape`) with `weight` (`[ci, co, kh, kw]`, PyTorch's
+/// layout, one group), plus `bias`, then `epilogue`. Each band of input rows is multiplied by
+/// the weight in one GEMM (`[co·kh·kw, pixels]`: what every input pixel adds to each tap), then
+/// scattered into the output, one output channel per task.
+pub fn conv_transpose2d_nchw(
+    input: &[f32],
+    shape: Nchw,
+    weight: &[f32],
+    co: usize,
+    geometry: TransposeGeometry,
+    bias: Option<&[f32]>,
+    epilogue: Epilogue<'_>,
+) -> (Vec<f32>, [usize; 2]) {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    let [sh, sw] = geometry.stride;
+    let [ph, pw] = geometry.padding;
+    let [dh, dw] = geometry.dilation;
+    assert_eq!(
+        input.len(),
+        b * ci * h * w,
+        "conv_transpose2d_nchw: input size"
+    );
+    assert_eq!(
+        weight.len(),
+        ci * co * kh * kw,
+        "conv_transpose2d_nchw: weight size"
+    );
+    let [oh, ow] = geometry.output([h, w]);
+    let m = co * kh * kw;
+    let rows_per_band = (COLUMN_FLOATS / (m * w)).clamp(1, h);
+    let mut out = vec![0.0f32; b * co * oh * ow];
+    let mut columns = Scratch::take(&COLUMNS, m * rows_per_band * w);
+    for n in 0..b {
+        let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
+        let dst = &mut out[n * co * oh * ow..(n + 1) * co * oh * ow];
+        if let Some(bias) = bias {
+            dst.par_chunks_exact_mut(oh * ow)
+                .zip(bias)
+                .for_each(|(plane, &v)| plane.fill(v));
+        }
+        for r0 in (0..h).step_by(rows_per_band) {
+            let rows = rows_per_band.min(h - r0);
+            let pixels = rows * w;
+            // SAFETY: dst is `[m, pixels]` row-major inside `columns`; lhs is the weight read as
+            // `[m, ci]` (element `(t, c)` at `c·m + t`); rhs is `[ci, pixels]` at row stride
+            // `h·w`, rows `r0..r0+rows` of this image.
+            unsafe {
+                gemm::gemm(
+                    m,
+                    pixels,
+                    ci,
+                    columns.as_mut_ptr(),
+                    1,
+                    pixels as isize,
+                    false,
+                    weight.as_ptr(),
+                    m as isize,
+                    1,
+                    image.as_ptr().add(r0 * w),
+                    1,
+                    (h * w) as isize,
+                    0.0,
+                    1.0,
+                    false,
+                    false,
+                    false,
+                    gemm::Parallelism::Rayon(0),
+                );
+            }
+            let columns = &columns[..m * pixels];
+            dst.par_chunks_exact_mut(oh * ow)
+                .enumerate()
+                .for_each(|(o, plane)| {
+                    for tap in 0..kh * kw {
+                        let (i, j) = (tap / kw, tap % kw);
+                        let src = &columns[(o * kh * kw + tap) * pixels..][..pixels];
+                        for (r, src) in src.chunks_exact(w).enumerate() {
+                            let y = ((r0 + r) * sh + i * dh) as isize - ph as isize;
+                            if y < 0 || y >= oh as isize {
+                                continue;
+                            }
+                            let row = &mut plane[y as usize * ow..][..ow];
+                            for (x, &v) in src.iter().enumerate() {
+                                let ox = (x * sw + j * dw) as isize - pw as isize;
+                                if ox >= 0 && (ox as usize) < ow {
+                                    row[ox as usize] += v;
+                                }
+                            }
+                        }
+                    }
+                });
+        }
+        epilogue.apply(dst, oh * ow);
+    }
+    columns.give_back(&COLUMNS);
+    (out, [oh, ow])
+}
+
+/// `[co, ci, taps]` → `[taps, co, ci]`: one contiguous `co × ci` matrix per tap.
+fn tap_weights(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; weight.len()];
+    for (o, per_out) in weight.chunks_exact(ci * taps).enumerate() {
+        for (i, per_in) in per_out.chunks_exact(taps).enumerate() {
+            for (t, &v) in per_in.iter().enumerate() {
+                out[(t * co + o) * ci + i] = v;
+            }
+        }
+    }
+    out
+}
+
+/// Writes `image` (`[c, h, w]`) into the interior of `padded` (`[c, hp, wp]`) and zeros its
+/// borders: each element once (the buffer is reused, its old contents are garbage).
+pub(super) fn pad_into(
+    padded: &mut [f32],
+    image: &[f32],
+    [c, h, w]: [usize; 3],
+    [top, left]: [usize; 2],
+    [hp, wp]: [usize; 2],
+) {
+    if hp == h && wp == w {
+        padded[..c * h * w].copy_from_slice(image);
+        return;
+    }
+    padded[..c * hp * wp]
+        .par_chunks_exact_mut(hp * wp)
+        .zip(image.par_chunks_exact(h * w))
+        .for_each(|(dst, src)| {
+            let (above, rest) = dst.split_at_mut(top * wp);
+            let (inner, below) = rest.split_at_mut(h * wp);
+            above.fill(0.0);
+            below.fill(0.0);
+            for (d, s) in inner.chunks_exact_mut(wp).zip(src.chunks_exact(w)) {
+                d[..left].fill(0.0);
+                d[left..left + w].copy_from_slice(s);
+                d[left + w..].fill(0.0);
+            }
+        });
+}
