@@ -102,11 +102,11 @@ enum Command {
 /// `mi_option_purge_delay` of mimalloc's `mi_option_e` (`mimalloc.h`).
 const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 
-/// Milliseconds a freed page waits before it goes back to the kernel. mimalloc's default (10 ms)
-/// returns the pages of a network's tensors between two layers and faults them in again, zeroed,
-/// for the next (a tenth of a MonSter++ pass, BENCHMARKS.md); a few seconds keep them for the
-/// whole pass and still hand them back once a stage is done with them.
-const PURGE_DELAY_MS: std::ffi::c_long = 5_000;
+/// Freed pages are never handed back to the kernel (`-1`). mimalloc's default returns the pages
+/// of a network's tensors between two layers and faults them in again, zeroed, for the next
+/// (32,000 page faults and a tenth of a MonSter++ pass, BENCHMARKS.md); a stage's memory then
+/// stays at its peak until the process ends, which is the figure a memory budget plans for.
+const PURGE_DELAY_MS: std::ffi::c_long = -1;
 
 fn main() -> ExitCode {
     // SAFETY: sets a plain integer option of the allocator, before any thread is started.

@@ -152,6 +152,8 @@ pub fn conv2d_nchw(
             epilogue,
             &mut out,
         );
+    } else if geometry.stride == [1, 1] && co < MIN_TAP_CHANNELS && ci >= MIN_TAP_CHANNELS {
+        conv_thin_output(input, shape, weight, co, geometry, epilogue, &mut out);
     } else if geometry.stride == [1, 1] && ci >= MIN_TAP_CHANNELS {
         conv_taps(input, shape, weight, co, geometry, epilogue, &mut out);
     } else {
@@ -244,6 +246,56 @@ fn conv_taps(
             });
     }
     wide.give_back(&WIDE);
+    padded.give_back(&PADDED);
+}
+
+/// Stride 1 with few output channels (a disparity head's 256 → 1): a GEMM with so few rows only
+/// streams its input once per tap, so each output row is accumulated directly instead, one
+/// multiply-add of a whole input row per channel and tap (one pass over the input).
+fn conv_thin_output(
+    input: &[f32],
+    shape: Nchw,
+    weight: &[f32],
+    co: usize,
+    geometry: Geometry,
+    epilogue: Epilogue<'_>,
+    out: &mut [f32],
+) {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    let [top, left, bottom, right] = geometry.padding;
+    let [dh, dw] = geometry.dilation;
+    let (hp, wp) = (h + top + bottom, w + left + right);
+    let [oh, ow] = geometry.output([h, w]);
+    let mut padded = Scratch::take(&PADDED, ci * hp * wp);
+    for n in 0..b {
+        let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
+        pad_into(&mut padded, image, [ci, h, w], [top, left], [hp, wp]);
+        let padded = &padded[..];
+        let dst = &mut out[n * co * oh * ow..(n + 1) * co * oh * ow];
+        // One task per (output channel, output row).
+        dst.par_chunks_exact_mut(ow)
+            .enumerate()
+            .for_each(|(row, acc)| {
+                let (o, y) = (row / oh, row % oh);
+                acc.fill(0.0);
+                let kernel = &weight[o * ci * kh * kw..(o + 1) * ci * kh * kw];
+                for (c, taps) in kernel.chunks_exact(kh * kw).enumerate() {
+                    let plane = &padded[c * hp * wp..(c + 1) * hp * wp];
+                    for (tap, &k) in taps.iter().enumerate() {
+                        let (i, j) = (tap / kw, tap % kw);
+                        let src = &plane[(y + i * dh) * wp + j * dw..][..ow];
+                        for (a, &v) in acc.iter_mut().zip(src) {
+                            *a += k * v;
+                        }
+                    }
+                }
+                let (scale, shift) = epilogue.channel(o);
+                for a in acc.iter_mut() {
+                    *a = epilogue.act.apply(*a * scale + shift);
+                }
+            });
+    }
     padded.give_back(&PADDED);
 }
 
@@ -435,11 +487,11 @@ pub fn conv_transpose2d_nchw(
                                 continue;
                             }
                             let row = &mut plane[y as usize * ow..][..ow];
-                            for (x, &v) in src.iter().enumerate() {
-                                let ox = (x * sw + j * dw) as isize - pw as isize;
-                                if ox >= 0 && (ox as usize) < ow {
-                                    row[ox as usize] += v;
-                                }
+                            // Input columns whose output column `x·sw + j·dw − pw` is inside.
+                            let x0 = pw.saturating_sub(j * dw).div_ceil(sw).min(w);
+                            let x1 = (ow + pw).saturating_sub(j * dw).div_ceil(sw).clamp(x0, w);
+                            for (x, &v) in (x0..x1).zip(&src[x0..x1]) {
+                                row[x * sw + j * dw - pw] += v;
                             }
                         }
                     }

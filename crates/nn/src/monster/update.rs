@@ -10,14 +10,16 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{PaddingConfig2d, Relu};
-use burn::tensor::activation::{relu, sigmoid, tanh};
+use burn::tensor::activation::{sigmoid, tanh};
 use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use rayon::prelude::*;
 
-use crate::conv::{conv2d_forward, conv2d_nchw, f32_vec, geometry, Epilogue, Nchw};
+use crate::conv::{
+    conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, Activation, Epilogue, Nchw,
+};
 use crate::resize::resize_bilinear;
 
 fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
@@ -67,11 +69,11 @@ impl ConvGru {
 
     /// `x_list` is concatenated along channels (upstream `*x_list`).
     pub fn forward(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
+        if self.fusable(&h) {
+            return self.forward_fused(h, ctx, x_list);
+        }
         let x = Tensor::cat(x_list, 1);
         let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
-        if let Some(h) = self.forward_fused(&h, ctx, &hx) {
-            return h;
-        }
         let z = sigmoid(conv2d_forward(&self.convz, hx.clone()) + ctx[0].clone());
         let r = sigmoid(conv2d_forward(&self.convr, hx) + ctx[1].clone());
         let q = tanh(
@@ -79,27 +81,47 @@ impl ConvGru {
         );
         (z.clone().neg().add_scalar(1.0)) * h + z * q
     }
-}
 
-impl ConvGru {
-    /// The same step on the CPU inference device without burn's element-wise passes: `convz`
-    /// and `convr` as one convolution (their weights stacked), the gates, `r·h` and the update
-    /// computed in place on the convolutions' outputs. `None` where [`conv2d_forward`] would
-    /// not take its fast path.
-    /// `hx` is `cat([h, x])`.
-    fn forward_fused(&self, h: &Tensor<4>, ctx: &GruContext, hx: &Tensor<4>) -> Option<Tensor<4>> {
-        let shared = geometry(&self.convz, hx)?;
-        let same = |c: &Conv2d| geometry(c, hx) == Some(shared) && c.bias.is_some();
-        if shared.stride != [1, 1] || !(same(&self.convz) && same(&self.convr) && same(&self.convq))
-        {
-            return None;
-        }
-        let device = hx.device();
+    /// Whether [`forward_fused`](Self::forward_fused) applies: the CPU inference device, and
+    /// the three convolutions alike (same-size, with biases) as upstream builds them.
+    fn fusable(&self, h: &Tensor<4>) -> bool {
+        let Some(shared) = geometry(&self.convz, h) else {
+            return false;
+        };
+        let same = |c: &Conv2d| geometry(c, h) == Some(shared) && c.bias.is_some();
+        let [kh, kw] = shared.kernel;
+        let [t, l, b, r] = shared.padding;
+        shared.stride == [1, 1]
+            && shared.dilation == [1, 1]
+            && [t + b, l + r] == [kh - 1, kw - 1]
+            && [&self.convz, &self.convr, &self.convq]
+                .into_iter()
+                .all(same)
+    }
+
+    /// The same step on the CPU inference device on plain buffers: `[h, x…]` assembled once,
+    /// `convz` and `convr` as one convolution (their weights stacked), the gates, `r·h` and the
+    /// update computed in place on the convolutions' outputs.
+    fn forward_fused(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
+        let device = h.device();
         let [b, hidden, height, width] = h.dims();
-        let [_, channels, _, _] = hx.dims();
         let plane = height * width;
+        let h = f32_vec(h);
+        let xs: Vec<Vec<f32>> = x_list.into_iter().map(f32_vec).collect();
+        let x_channels = xs.iter().map(|x| x.len() / (b * plane)).sum::<usize>();
+        let channels = hidden + x_channels;
+        let mut hx = Vec::with_capacity(b * channels * plane);
+        for n in 0..b {
+            hx.extend_from_slice(&h[n * hidden * plane..(n + 1) * hidden * plane]);
+            for x in &xs {
+                let per_image = x.len() / b;
+                hx.extend_from_slice(&x[n * per_image..(n + 1) * per_image]);
+            }
+        }
+        drop(xs);
+        let geometry = geometry(&self.convz, &ctx[0]).expect("checked by fusable");
         let weights = |c: &Conv2d| f32_vec(c.weight.val());
-        let biases = |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked above").val());
+        let biases = |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked by fusable").val());
         let shape = Nchw {
             b,
             c: channels,
@@ -107,13 +129,17 @@ impl ConvGru {
             w: width,
         };
         let conv = |input: &[f32], weight: &[f32], bias: &[f32], co: usize| {
-            let (out, size) =
-                conv2d_nchw(input, shape, weight, co, shared, Epilogue::bias(Some(bias)));
+            let (out, size) = conv2d_nchw(
+                input,
+                shape,
+                weight,
+                co,
+                geometry,
+                Epilogue::bias(Some(bias)),
+            );
             debug_assert_eq!(size, [height, width], "a same-size convolution");
             out
         };
-        let h = f32_vec(h.clone());
-        let mut hx = f32_vec(hx.clone());
         let [cz, cr, cq] = ctx.clone().map(f32_vec);
         let zr = conv(
             &hx,
@@ -140,16 +166,14 @@ impl ConvGru {
                 .zip(&h[at])
                 .for_each(|(((rh, &v), &c), &h)| *rh = sigmoid_f32(v + c) * h);
         }
+        drop(zr);
         let mut q = conv(&hx, &weights(&self.convq), &biases(&self.convq), hidden);
         q.par_iter_mut()
             .zip(&cq)
             .zip(&z)
             .zip(&h)
             .for_each(|(((q, &c), &z), &h)| *q = (1.0 - z) * h + z * (*q + c).tanh());
-        Some(Tensor::from_data(
-            TensorData::new(q, [b, hidden, height, width]),
-            &device,
-        ))
+        Tensor::from_data(TensorData::new(q, [b, hidden, height, width]), &device)
     }
 }
 
@@ -173,7 +197,10 @@ impl DispHead {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        conv2d_forward(&self.conv2, relu(conv2d_forward(&self.conv1, x)))
+        conv2d_forward(
+            &self.conv2,
+            conv2d_fused(&self.conv1, None, Activation::Relu, x),
+        )
     }
 }
 
@@ -201,15 +228,24 @@ impl BasicMotionEncoder {
     }
 
     pub fn forward(&self, disp: Tensor<4>, corr: Tensor<4>) -> Tensor<4> {
-        let cor = relu(conv2d_forward(
+        let cor = conv2d_fused(
             &self.convc2,
-            relu(conv2d_forward(&self.convc1, corr)),
-        ));
-        let d = relu(conv2d_forward(
+            None,
+            Activation::Relu,
+            conv2d_fused(&self.convc1, None, Activation::Relu, corr),
+        );
+        let d = conv2d_fused(
             &self.convd2,
-            relu(conv2d_forward(&self.convd1, disp.clone())),
-        ));
-        let out = relu(conv2d_forward(&self.conv, Tensor::cat(vec![cor, d], 1)));
+            None,
+            Activation::Relu,
+            conv2d_fused(&self.convd1, None, Activation::Relu, disp.clone()),
+        );
+        let out = conv2d_fused(
+            &self.conv,
+            None,
+            Activation::Relu,
+            Tensor::cat(vec![cor, d], 1),
+        );
         Tensor::cat(vec![out, disp], 1)
     }
 }
@@ -262,33 +298,57 @@ impl BasicMotionEncoderMix2 {
     /// `own` goes through the plain weights, `other` through the `*_mono` weights (for the mono
     /// instance upstream passes the mono branch as `own`).
     pub fn forward(&self, own: &Branch, other: &Branch) -> Tensor<4> {
-        let cor = relu(conv2d_forward(
+        let cor = conv2d_fused(
             &self.convc2,
-            relu(conv2d_forward(
+            None,
+            Activation::Relu,
+            conv2d_fused(
                 &self.convc1,
+                None,
+                Activation::Relu,
                 Tensor::cat(vec![own.corr.clone(), own.flaw.clone()], 1),
-            )),
-        ));
-        let cor_o = relu(conv2d_forward(
+            ),
+        );
+        let cor_o = conv2d_fused(
             &self.convc2_mono,
-            relu(conv2d_forward(
+            None,
+            Activation::Relu,
+            conv2d_fused(
                 &self.convc1_mono,
+                None,
+                Activation::Relu,
                 Tensor::cat(vec![other.corr.clone(), other.flaw.clone()], 1),
-            )),
-        ));
-        let d = relu(conv2d_forward(
+            ),
+        );
+        let d = conv2d_fused(
             &self.convd2,
-            relu(conv2d_forward(&self.convd1, own.disp.clone())),
-        ));
-        let d_o = relu(conv2d_forward(
+            None,
+            Activation::Relu,
+            conv2d_fused(&self.convd1, None, Activation::Relu, own.disp.clone()),
+        );
+        let d_o = conv2d_fused(
             &self.convd2_mono,
-            relu(conv2d_forward(&self.convd1_mono, other.disp.clone())),
-        ));
-        let out = relu(conv2d_forward(&self.conv, Tensor::cat(vec![cor, d], 1)));
-        let out_o = relu(conv2d_forward(
+            None,
+            Activation::Relu,
+            conv2d_fused(
+                &self.convd1_mono,
+                None,
+                Activation::Relu,
+                other.disp.clone(),
+            ),
+        );
+        let out = conv2d_fused(
+            &self.conv,
+            None,
+            Activation::Relu,
+            Tensor::cat(vec![cor, d], 1),
+        );
+        let out_o = conv2d_fused(
             &self.conv_mono,
+            None,
+            Activation::Relu,
             Tensor::cat(vec![cor_o, d_o], 1),
-        ));
+        );
         Tensor::cat(vec![out, own.disp.clone(), out_o, other.disp.clone()], 1)
     }
 }
@@ -364,7 +424,7 @@ impl BasicMultiUpdateBlock {
             self.encoder.forward(disp, corr)
         });
         let delta = self.disp_head.forward(net[0].clone());
-        let mask_feat = relu(conv2d_forward(&self.mask_feat_4.0, net[0].clone()));
+        let mask_feat = conv2d_fused(&self.mask_feat_4.0, None, Activation::Relu, net[0].clone());
         UpdateOut {
             net,
             mask_feat,
@@ -410,7 +470,7 @@ impl BasicMultiUpdateBlockMix2 {
             self.encoder.forward(own, other)
         });
         let delta = self.disp_head.forward(net[0].clone());
-        let mask_feat = relu(conv2d_forward(&self.mask_feat_4.0, net[0].clone()));
+        let mask_feat = conv2d_fused(&self.mask_feat_4.0, None, Activation::Relu, net[0].clone());
         UpdateOut {
             net,
             mask_feat,
