@@ -154,7 +154,7 @@ pub fn geometry(conv: &Conv2d, x: &Tensor<4>) -> Option<Geometry> {
 
 /// The plain CPU device without autodiff (device equality ignores the autodiff wrapper: it is
 /// asked separately).
-pub fn on_cpu_inference(x: &Tensor<4>) -> bool {
+pub fn on_cpu_inference<const D: usize>(x: &Tensor<D>) -> bool {
     let device = x.device();
     !device.is_autodiff() && device == Device::flex()
 }

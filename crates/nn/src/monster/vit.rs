@@ -8,9 +8,9 @@
 use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig};
-use burn::tensor::activation::{gelu, softmax};
 use burn::tensor::{Device, Tensor, TensorData};
 
+use crate::attention::{attention_qkv, gelu_erf};
 use crate::config::VitConfig;
 use crate::resize::resize_bilinear;
 
@@ -53,21 +53,9 @@ impl Attention {
         let [b, n, e] = x.dims();
         let h = self.num_heads;
         let hd = e / h;
-        // B×N×3E → B×N×3×H×hd → 3×B×H×N×hd
-        let qkv = self
-            .qkv
-            .forward(x)
-            .reshape([b, n, 3, h, hd])
-            .permute([2, 0, 3, 1, 4]);
-        let q = qkv
-            .clone()
-            .narrow(0, 0, 1)
-            .reshape([b, h, n, hd])
-            .mul_scalar((hd as f64).powf(-0.5));
-        let k = qkv.clone().narrow(0, 1, 1).reshape([b, h, n, hd]);
-        let v = qkv.narrow(0, 2, 1).reshape([b, h, n, hd]);
-        let attn = softmax(q.matmul(k.swap_dims(2, 3)), 3);
-        let out = attn.matmul(v).swap_dims(1, 2).reshape([b, n, e]);
+        let qkv = self.qkv.forward(x);
+        let out = attention_qkv(qkv, h, (hd as f64).powf(-0.5) as f32);
+        debug_assert_eq!(out.dims(), [b, n, e]);
         self.proj.forward(out)
     }
 }
@@ -98,7 +86,7 @@ pub struct Mlp {
 impl Mlp {
     /// x: B×N×E.
     pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
-        self.fc2.forward(gelu(self.fc1.forward(x)))
+        self.fc2.forward(gelu_erf(self.fc1.forward(x)))
     }
 }
 

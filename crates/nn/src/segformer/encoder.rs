@@ -8,8 +8,10 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig, PaddingConfig2d};
-use burn::tensor::activation::{gelu, softmax};
+use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
+
+use crate::attention::gelu_erf;
 
 use super::config::SegformerConfig;
 use super::trace::Trace;
@@ -189,7 +191,7 @@ impl MixFfn {
     pub fn forward(&self, x: Tensor<3>, h: usize, w: usize) -> Tensor<3> {
         let y = self.dense1.forward(x);
         let y = to_tokens(self.dwconv.dwconv.forward(to_map(y, h, w)));
-        self.dense2.forward(gelu(y))
+        self.dense2.forward(gelu_erf(y))
     }
 }
 
