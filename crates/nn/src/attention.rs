@@ -10,6 +10,7 @@ use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{f32_vec, on_cpu_inference};
+use crate::matmul::{gemm_f32, SharedOut, Strided};
 
 /// Self-attention of `qkv` (`[b, n, 3e]`: q, k, v, each `heads × e/heads`, as PyTorch's
 /// `qkv.reshape(b, n, 3, heads, e/heads)`) with scores scaled by `scale`: `[b, n, e]`, heads
@@ -27,7 +28,7 @@ pub fn attention_qkv(qkv: Tensor<3>, heads: usize, scale: f32) -> Tensor<3> {
     let device = qkv.device();
     let qkv = f32_vec(qkv);
     let mut out = vec![0.0f32; b * n * e];
-    let dst = Output(out.as_mut_ptr());
+    let dst = SharedOut::new(&mut out);
     (0..b * heads).into_par_iter().for_each(|task| {
         let (image, head) = (task / heads, task % heads);
         let base = image * n * e3 + head * hd;
@@ -36,25 +37,13 @@ pub fn attention_qkv(qkv: Tensor<3>, heads: usize, scale: f32) -> Tensor<3> {
         // SAFETY: scores `[n, n]` row-major; q `[n, hd]` at row stride 3e; kᵀ `[hd, n]` read as
         // element (d, j) = k[j·3e + d]; all inside `qkv`.
         unsafe {
-            gemm::gemm(
-                n,
-                n,
-                hd,
-                scores.as_mut_ptr(),
-                1,
-                n as isize,
+            gemm_f32(
+                [n, n, hd],
+                Strided::rows(scores.as_mut_ptr(), n),
+                Strided::rows(q.as_ptr(), e3),
+                Strided::columns(k.as_ptr(), e3),
                 false,
-                q.as_ptr(),
-                1,
-                e3 as isize,
-                k.as_ptr(),
-                e3 as isize,
-                1,
-                0.0,
                 scale,
-                false,
-                false,
-                false,
                 gemm::Parallelism::None,
             );
         }
@@ -72,47 +61,18 @@ pub fn attention_qkv(qkv: Tensor<3>, heads: usize, scale: f32) -> Tensor<3> {
         // SAFETY: this task alone writes columns `head·hd .. (head+1)·hd` of image `image`'s
         // `[n, e]` output; v `[n, hd]` at row stride 3e inside `qkv`.
         unsafe {
-            gemm::gemm(
-                n,
-                hd,
-                n,
-                dst.at(image * n * e + head * hd),
-                1,
-                e as isize,
+            gemm_f32(
+                [n, hd, n],
+                Strided::rows(dst.at(image * n * e + head * hd), e),
+                Strided::rows(scores.as_ptr(), n),
+                Strided::rows(v.as_ptr(), e3),
                 false,
-                scores.as_ptr(),
-                1,
-                n as isize,
-                v.as_ptr(),
-                1,
-                e3 as isize,
-                0.0,
                 1.0,
-                false,
-                false,
-                false,
                 gemm::Parallelism::None,
             );
         }
     });
     Tensor::from_data(TensorData::new(out, [b, n, e]), &device)
-}
-
-/// A raw output pointer shared by the head tasks, each writing only its own columns.
-#[derive(Clone, Copy)]
-struct Output(*mut f32);
-// SAFETY: the tasks write disjoint columns of the output (see `attention_qkv`).
-unsafe impl Send for Output {}
-unsafe impl Sync for Output {}
-
-impl Output {
-    /// The pointer `offset` values in (a method, so that closures capture the whole `Output`).
-    ///
-    /// # Safety
-    /// `offset` is inside the output.
-    unsafe fn at(self, offset: usize) -> *mut f32 {
-        self.0.add(offset)
-    }
 }
 
 /// GELU with the exact erf, `x·½·(1 + erf(x/√2))` (PyTorch's default), in parallel on the CPU

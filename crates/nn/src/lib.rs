@@ -44,6 +44,7 @@ pub mod conv;
 pub mod device;
 pub mod dinov3;
 pub mod infer;
+mod matmul;
 pub mod monster;
 pub mod profile;
 pub mod resize;

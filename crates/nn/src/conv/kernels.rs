@@ -6,6 +6,7 @@
 use rayon::prelude::*;
 
 use super::scratch::{Scratch, COLUMNS, PADDED, WIDE};
+use crate::matmul::{gemm_f32, Strided};
 
 /// Output pixels per tap-GEMM call: a few rows of the padded image, so that the output tile
 /// stays in the cache while the taps accumulate into it.
@@ -205,25 +206,13 @@ fn conv_taps(
                 // element, `(ci−1)·plane + offset + rows·wp − 1 ≤ ci·plane + span_w − 1`, is
                 // inside `padded`.
                 unsafe {
-                    gemm::gemm(
-                        co,
-                        rows * wp,
-                        ci,
-                        wide.as_mut_ptr().add(r0 * wp),
-                        1,
-                        (oh * wp) as isize,
+                    gemm_f32(
+                        [co, rows * wp, ci],
+                        Strided::rows(wide.as_mut_ptr().add(r0 * wp), oh * wp),
+                        Strided::rows(tap_weight.as_ptr(), ci),
+                        Strided::rows(padded.as_ptr().add(offset), plane),
                         tap > 0,
-                        tap_weight.as_ptr(),
-                        1,
-                        ci as isize,
-                        padded.as_ptr().add(offset),
-                        1,
-                        plane as isize,
                         1.0,
-                        1.0,
-                        false,
-                        false,
-                        false,
                         gemm::Parallelism::Rayon(0),
                     );
                 }
@@ -351,25 +340,13 @@ fn conv_unfolded(
             // SAFETY: dst is `co × pixels` at row stride `oh·ow` inside this image's output;
             // lhs is `[co, k]` row-major; rhs is `[k, pixels]` row-major inside `columns`.
             unsafe {
-                gemm::gemm(
-                    co,
-                    pixels,
-                    k,
-                    out.as_mut_ptr().add(n * co * oh * ow + r0 * ow),
-                    1,
-                    (oh * ow) as isize,
+                gemm_f32(
+                    [co, pixels, k],
+                    Strided::rows(out.as_mut_ptr().add(n * co * oh * ow + r0 * ow), oh * ow),
+                    Strided::rows(weight.as_ptr(), k),
+                    Strided::rows(columns.as_ptr(), pixels),
                     false,
-                    weight.as_ptr(),
-                    1,
-                    k as isize,
-                    columns.as_ptr(),
-                    1,
-                    pixels as isize,
-                    0.0,
                     1.0,
-                    false,
-                    false,
-                    false,
                     gemm::Parallelism::Rayon(0),
                 );
             }
@@ -452,25 +429,13 @@ pub fn conv_transpose2d_nchw(
             // `[m, ci]` (element `(t, c)` at `c·m + t`); rhs is `[ci, pixels]` at row stride
             // `h·w`, rows `r0..r0+rows` of this image.
             unsafe {
-                gemm::gemm(
-                    m,
-                    pixels,
-                    ci,
-                    columns.as_mut_ptr(),
-                    1,
-                    pixels as isize,
+                gemm_f32(
+                    [m, pixels, ci],
+                    Strided::rows(columns.as_mut_ptr(), pixels),
+                    Strided::columns(weight.as_ptr(), m),
+                    Strided::rows(image.as_ptr().add(r0 * w), h * w),
                     false,
-                    weight.as_ptr(),
-                    m as isize,
-                    1,
-                    image.as_ptr().add(r0 * w),
-                    1,
-                    (h * w) as isize,
-                    0.0,
                     1.0,
-                    false,
-                    false,
-                    false,
                     gemm::Parallelism::Rayon(0),
                 );
             }

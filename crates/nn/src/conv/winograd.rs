@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 use super::kernels::{Epilogue, Nchw};
 use super::scratch::{Scratch, PADDED};
+use crate::matmul::{gemm_f32, SharedOut, Strided};
 
 /// Tiles per band: the transformed input of a band (`16 · ci · tiles` floats) stays within a
 /// few MiB while its GEMMs are wide enough to run at speed.
@@ -50,13 +51,6 @@ fn transform_weights(weight: &[f32], co: usize, ci: usize) -> Vec<f32> {
     u
 }
 
-/// A raw output pointer shared by the band tasks, each writing only its own rows.
-#[derive(Clone, Copy)]
-struct Output(*mut f32);
-// SAFETY: the tasks write disjoint rows of the output (see `conv3x3`).
-unsafe impl Send for Output {}
-unsafe impl Sync for Output {}
-
 /// 3×3, stride 1, dilation 1 convolution of `input` (`shape`) with `weight` (`[co, ci, 3, 3]`),
 /// zero padding `[top, left, bottom, right]`, then `epilogue`, into `out` (`[b, co, oh, ow]`).
 pub(super) fn conv3x3(
@@ -82,7 +76,7 @@ pub(super) fn conv3x3(
         let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
         pad_split(&mut padded, image, [ci, h, w], [top, left], [hp, wp]);
         let padded = &padded[..];
-        let dst = Output(out[n * co * oh * ow..].as_mut_ptr());
+        let dst = SharedOut::new(&mut out[n * co * oh * ow..]);
         let bands: Vec<usize> = (0..th).step_by(rows_per_band).collect();
         bands.into_par_iter().for_each(|ty0| {
             let rows = rows_per_band.min(th - ty0);
@@ -94,25 +88,13 @@ pub(super) fn conv3x3(
                 // SAFETY: dst `[co, tiles]` inside `m` and rhs `[ci, tiles]` inside `v`, both
                 // row-major; lhs `[co, ci]` at row stride `16·ci` inside `u`.
                 unsafe {
-                    gemm::gemm(
-                        co,
-                        tiles,
-                        ci,
-                        m.as_mut_ptr().add(e * co * tiles),
-                        1,
-                        tiles as isize,
+                    gemm_f32(
+                        [co, tiles, ci],
+                        Strided::rows(m.as_mut_ptr().add(e * co * tiles), tiles),
+                        Strided::rows(u.as_ptr().add(e * ci), 16 * ci),
+                        Strided::rows(v.as_ptr().add(e * ci * tiles), tiles),
                         false,
-                        u.as_ptr().add(e * ci),
-                        1,
-                        (16 * ci) as isize,
-                        v.as_ptr().add(e * ci * tiles),
-                        1,
-                        tiles as isize,
-                        0.0,
                         1.0,
-                        false,
-                        false,
-                        false,
                         gemm::Parallelism::None,
                     );
                 }
@@ -225,7 +207,7 @@ unsafe fn transform_output(
     rows: usize,
     tw: usize,
     epilogue: &Epilogue<'_>,
-    dst: Output,
+    dst: SharedOut,
 ) {
     let tiles = rows * tw;
     let mut t = vec![0.0f32; 8 * tw];
@@ -233,7 +215,7 @@ unsafe fn transform_output(
     let mut y_odd = vec![0.0f32; tw];
     for o in 0..co {
         let (scale, shift) = epilogue.channel(o);
-        let plane = dst.0.add(o * oh * ow);
+        let plane = dst.at(o * oh * ow);
         for r in 0..rows {
             let y = 2 * (ty0 + r);
             let e = |k: usize| &m[k * co * tiles + o * tiles + r * tw..][..tw];
