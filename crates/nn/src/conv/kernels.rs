@@ -17,7 +17,7 @@ const COLUMN_FLOATS: usize = 1 << 18;
 
 /// Input channels from which a stride-1 convolution runs as tap GEMMs; thinner inputs make
 /// GEMMs too thin to pay, so they are unfolded (`k = c·kh·kw` instead of `c`).
-pub const MIN_TAP_CHANNELS: usize = 16;
+const MIN_TAP_CHANNELS: usize = 16;
 
 /// Shape of an NCHW tensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,11 +38,16 @@ pub struct Geometry {
 }
 
 impl Geometry {
+    /// `[hp, wp]`: the size of an `h × w` input with its padding.
+    pub fn padded(&self, [h, w]: [usize; 2]) -> [usize; 2] {
+        let [top, left, bottom, right] = self.padding;
+        [h + top + bottom, w + left + right]
+    }
+
     /// Output `[oh, ow]` for an `h × w` input.
     pub fn output(&self, [h, w]: [usize; 2]) -> [usize; 2] {
-        let [top, left, bottom, right] = self.padding;
         let span = |k: usize, d: usize| d * (k - 1) + 1;
-        let (hp, wp) = (h + top + bottom, w + left + right);
+        let [hp, wp] = self.padded([h, w]);
         let (kh, kw) = (
             span(self.kernel[0], self.dilation[0]),
             span(self.kernel[1], self.dilation[1]),
@@ -181,9 +186,9 @@ fn conv_taps(
 ) {
     let Nchw { b, c: ci, h, w } = shape;
     let [kh, kw] = geometry.kernel;
-    let [top, left, bottom, right] = geometry.padding;
+    let [top, left, _, _] = geometry.padding;
     let [dh, dw] = geometry.dilation;
-    let (hp, wp) = (h + top + bottom, w + left + right);
+    let [hp, wp] = geometry.padded([h, w]);
     let [oh, ow] = geometry.output([h, w]);
     let span_w = dw * (kw - 1);
     // The taps' shifted views of the last channel read up to `span_w` values past the image
@@ -252,9 +257,9 @@ fn conv_thin_output(
 ) {
     let Nchw { b, c: ci, h, w } = shape;
     let [kh, kw] = geometry.kernel;
-    let [top, left, bottom, right] = geometry.padding;
+    let [top, left, _, _] = geometry.padding;
     let [dh, dw] = geometry.dilation;
-    let (hp, wp) = (h + top + bottom, w + left + right);
+    let [hp, wp] = geometry.padded([h, w]);
     let [oh, ow] = geometry.output([h, w]);
     let mut padded = Scratch::take(&PADDED, ci * hp * wp);
     for n in 0..b {

@@ -22,7 +22,6 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 pub use kernels::{
     conv2d_nchw, conv_transpose2d_nchw, Activation, Epilogue, Geometry, Nchw, TransposeGeometry,
-    MIN_TAP_CHANNELS,
 };
 
 /// `conv.forward(x)`.

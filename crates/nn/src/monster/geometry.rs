@@ -14,6 +14,7 @@ use burn::tensor::{Int, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{f32_vec, on_cpu_inference};
+use crate::matmul::SharedOut;
 
 /// Profile group of the volume's construction and its lookups.
 pub const GEO: &str = "geo encoding lookup";
@@ -153,47 +154,49 @@ impl GeoEncodingVolume {
         let r = self.radius as f32;
         let c = self.out_channels();
         let plane = h * w;
-        let mut out = vec![0.0f32; b * c * plane];
-        // One task per image row: `c` runs of `w` values, at stride `plane`, in its own rows.
-        let rows: Vec<Vec<f32>> = (0..b * h)
-            .into_par_iter()
-            .map(|row| {
-                let mut values = vec![0.0f32; c * w];
-                let mut channel = 0;
-                for (i, (geo, corr)) in levels.iter().enumerate() {
-                    let scale = (1u64 << i) as f32;
-                    let n = b * h * w;
-                    let (g, d) = (self.geo[i].dims()[1], self.geo[i].dims()[2]);
-                    let l2 = corr.len() / n;
-                    for x in 0..w {
-                        let p = row * w + x;
-                        let disp = disp_values[p];
-                        let voxels = &geo[p * g * d..(p + 1) * g * d];
-                        for k in 0..taps {
-                            let dx = k as f32 - r;
-                            let (i0, w0, i1, w1) = linear_tap(disp / scale + dx, d);
-                            for gi in 0..g {
-                                let v = &voxels[gi * d..(gi + 1) * d];
-                                values[(channel + gi * taps + k) * w + x] = v[i0] * w0 + v[i1] * w1;
-                            }
-                            let pos = x as f32 / scale - disp / scale + dx;
-                            let (i0, w0, i1, w1) = linear_tap(pos, l2);
-                            let line = &corr[p * l2..(p + 1) * l2];
-                            values[(channel + g * taps + k) * w + x] =
-                                line[i0] * w0 + line[i1] * w1;
-                        }
-                    }
-                    channel += (g + 1) * taps;
-                }
-                values
-            })
+        // Per level: groups, disparities of the geometry volume, columns of the correlation.
+        let shapes: Vec<[usize; 3]> = levels
+            .iter()
+            .zip(&self.geo)
+            .map(|((_, corr), geo)| [geo.dims()[1], geo.dims()[2], corr.len() / (b * plane)])
             .collect();
-        for (row, values) in rows.iter().enumerate() {
+        let mut out = vec![0.0f32; b * c * plane];
+        let dst = SharedOut::new(&mut out);
+        // One task per image row: `c` runs of `w` values, written into that row of each channel.
+        (0..b * h).into_par_iter().for_each(|row| {
+            let mut values = vec![0.0f32; c * w];
+            let mut channel = 0;
+            for (i, ((geo, corr), &[g, d, l2])) in levels.iter().zip(&shapes).enumerate() {
+                let scale = (1u64 << i) as f32;
+                for x in 0..w {
+                    let p = row * w + x;
+                    let disp = disp_values[p];
+                    let voxels = &geo[p * g * d..(p + 1) * g * d];
+                    for k in 0..taps {
+                        let dx = k as f32 - r;
+                        let (i0, w0, i1, w1) = linear_tap(disp / scale + dx, d);
+                        for gi in 0..g {
+                            let v = &voxels[gi * d..(gi + 1) * d];
+                            values[(channel + gi * taps + k) * w + x] = v[i0] * w0 + v[i1] * w1;
+                        }
+                        let pos = x as f32 / scale - disp / scale + dx;
+                        let (i0, w0, i1, w1) = linear_tap(pos, l2);
+                        let line = &corr[p * l2..(p + 1) * l2];
+                        values[(channel + g * taps + k) * w + x] = line[i0] * w0 + line[i1] * w1;
+                    }
+                }
+                channel += (g + 1) * taps;
+            }
             let (n, y) = (row / h, row % h);
             for (ch, run) in values.chunks_exact(w).enumerate() {
-                out[(n * c + ch) * plane + y * w..][..w].copy_from_slice(run);
+                // SAFETY: row `y` of channel `ch` of image `n`, inside `out`; only this task
+                // writes image row `row`.
+                let target = unsafe {
+                    std::slice::from_raw_parts_mut(dst.at((n * c + ch) * plane + y * w), w)
+                };
+                target.copy_from_slice(run);
             }
-        }
+        });
         Tensor::from_data(TensorData::new(out, [b, c, h, w]), &disp.device())
     }
 }

@@ -18,7 +18,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{
-    conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, Activation, Epilogue, Nchw,
+    conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, Activation, Epilogue, Geometry,
+    Nchw,
 };
 use crate::resize::resize_bilinear;
 
@@ -69,8 +70,8 @@ impl ConvGru {
 
     /// `x_list` is concatenated along channels (upstream `*x_list`).
     pub fn forward(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
-        if self.fusable(&h) {
-            return self.forward_fused(h, ctx, x_list);
+        if let Some(geometry) = self.fused_geometry(&h) {
+            return self.forward_fused(h, ctx, x_list, geometry);
         }
         let x = Tensor::cat(x_list, 1);
         let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
@@ -82,27 +83,33 @@ impl ConvGru {
         (z.clone().neg().add_scalar(1.0)) * h + z * q
     }
 
-    /// Whether [`forward_fused`](Self::forward_fused) applies: the CPU inference device, and
-    /// the three convolutions alike (same-size, with biases) as upstream builds them.
-    fn fusable(&self, h: &Tensor<4>) -> bool {
-        let Some(shared) = geometry(&self.convz, h) else {
-            return false;
-        };
+    /// The convolutions' shared geometry where [`forward_fused`](Self::forward_fused) applies:
+    /// the CPU inference device, and the three convolutions alike (same-size, with biases) as
+    /// upstream builds them.
+    fn fused_geometry(&self, h: &Tensor<4>) -> Option<Geometry> {
+        let shared = geometry(&self.convz, h)?;
         let same = |c: &Conv2d| geometry(c, h) == Some(shared) && c.bias.is_some();
         let [kh, kw] = shared.kernel;
         let [t, l, b, r] = shared.padding;
-        shared.stride == [1, 1]
+        let fusable = shared.stride == [1, 1]
             && shared.dilation == [1, 1]
             && [t + b, l + r] == [kh - 1, kw - 1]
             && [&self.convz, &self.convr, &self.convq]
                 .into_iter()
-                .all(same)
+                .all(same);
+        fusable.then_some(shared)
     }
 
     /// The same step on the CPU inference device on plain buffers: `[h, x…]` assembled once,
     /// `convz` and `convr` as one convolution (their weights stacked), the gates, `r·h` and the
     /// update computed in place on the convolutions' outputs.
-    fn forward_fused(&self, h: Tensor<4>, ctx: &GruContext, x_list: Vec<Tensor<4>>) -> Tensor<4> {
+    fn forward_fused(
+        &self,
+        h: Tensor<4>,
+        ctx: &GruContext,
+        x_list: Vec<Tensor<4>>,
+        geometry: Geometry,
+    ) -> Tensor<4> {
         let device = h.device();
         let [b, hidden, height, width] = h.dims();
         let plane = height * width;
@@ -119,9 +126,9 @@ impl ConvGru {
             }
         }
         drop(xs);
-        let geometry = geometry(&self.convz, &ctx[0]).expect("checked by fusable");
         let weights = |c: &Conv2d| f32_vec(c.weight.val());
-        let biases = |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked by fusable").val());
+        let biases =
+            |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked by fused_geometry").val());
         let shape = Nchw {
             b,
             c: channels,
