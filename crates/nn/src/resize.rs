@@ -6,12 +6,18 @@
 //! needs another route: a tensor that takes part in an autodiff graph is resized axis by axis as
 //! `x[i0]·(1 − λ) + x[i1]·λ` with two `select`s, whose backward (a scatter-add) every backend
 //! has. Tensors outside a graph (inference), and every tensor on the CPU `flex` backend (whose
-//! kernel has a backward and trains 17 % faster than the select path), keep burn's kernel. Both
-//! follow PyTorch's source-index rules, so they agree to float rounding (`tests/resize.rs`).
+//! kernel has a backward and trains 17 % faster than the select path), keep burn's kernel; on the
+//! CPU inference device a plain-buffer kernel ([`resize_bilinear_planes`]) runs instead, since
+//! burn's took 4 % of a MonSter++ pass (the ConvGRU resizes its hidden states at every
+//! iteration). All follow PyTorch's source-index rules, so they agree to float rounding
+//! (`tests/resize.rs`).
 
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Int, Tensor, TensorData};
+use rayon::prelude::*;
+
+use crate::conv::{f32_vec, on_cpu_inference};
 
 /// Bilinear resize of `B×C×H×W` to `size = [H', W']` with PyTorch's `align_corners` semantics.
 pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
@@ -19,7 +25,11 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> T
         // PyTorch copies in both modes when the size does not change.
         return x;
     }
-    if x.is_tracked() && x.device().inner() != Device::flex() {
+    if on_cpu_inference(&x) {
+        let (device, [b, c, h, w]) = (x.device(), x.dims());
+        let out = resize_bilinear_planes(&f32_vec(x), [h, w], size, align_corners);
+        Tensor::from_data(TensorData::new(out, [b, c, size[0], size[1]]), &device)
+    } else if x.is_tracked() && x.device().inner() != Device::flex() {
         resize_bilinear_separable(x, size, align_corners)
     } else {
         interpolate(
@@ -36,6 +46,58 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> T
 pub fn resize_bilinear_separable(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
     let x = resize_axis(x, 2, size[0], align_corners);
     resize_axis(x, 3, size[1], align_corners)
+}
+
+/// Bilinear resize of every `h × w` plane of `planes` (NCHW, any number of planes) to `size`,
+/// as PyTorch's `upsample_bilinear2d` computes it:
+/// `λ0ʸ·(λ0ˣ·x00 + λ1ˣ·x01) + λ1ʸ·(λ0ˣ·x10 + λ1ˣ·x11)`. One rayon task per plane.
+pub fn resize_bilinear_planes(
+    planes: &[f32],
+    [h, w]: [usize; 2],
+    size: [usize; 2],
+    align_corners: bool,
+) -> Vec<f32> {
+    let [oh, ow] = size;
+    let rows = linear_taps(h, oh, align_corners);
+    let cols = linear_taps(w, ow, align_corners);
+    let mut out = vec![0.0f32; planes.len() / (h * w) * oh * ow];
+    if out.is_empty() {
+        return out;
+    }
+    out.par_chunks_exact_mut(oh * ow)
+        .zip(planes.par_chunks_exact(h * w))
+        .for_each(|(dst, src)| {
+            // A source row blended along x, kept while consecutive output rows reuse it.
+            let blend = |y: usize, row: &mut [f32]| {
+                let s = &src[y * w..(y + 1) * w];
+                for (x, v) in row.iter_mut().enumerate() {
+                    *v = cols.w0[x] * s[cols.i0[x] as usize] + cols.w1[x] * s[cols.i1[x] as usize];
+                }
+            };
+            let (mut top, mut bottom) = (vec![0.0f32; ow], vec![0.0f32; ow]);
+            let mut loaded = [usize::MAX; 2];
+            for (y, out_row) in dst.chunks_exact_mut(ow).enumerate() {
+                let (y0, y1) = (rows.i0[y] as usize, rows.i1[y] as usize);
+                if loaded[0] != y0 {
+                    if loaded[1] == y0 {
+                        std::mem::swap(&mut top, &mut bottom);
+                        loaded[1] = usize::MAX;
+                    } else {
+                        blend(y0, &mut top);
+                    }
+                    loaded[0] = y0;
+                }
+                if loaded[1] != y1 {
+                    blend(y1, &mut bottom);
+                    loaded[1] = y1;
+                }
+                let (a, b) = (rows.w0[y], rows.w1[y]);
+                for ((o, &t), &u) in out_row.iter_mut().zip(&top).zip(&bottom) {
+                    *o = a * t + b * u;
+                }
+            }
+        });
+    out
 }
 
 /// Resizes dimension `dim` (2 or 3) of `x` to `len` samples.

@@ -53,6 +53,31 @@ fn separable_matches_the_kernel() {
     }
 }
 
+/// The plain-buffer kernel of the CPU inference device (what `resize_bilinear` runs there)
+/// against burn's, including the MonSter++ ConvGRU's ×2 resizes. Both the kernel and the
+/// select path compute source positions in f32 as PyTorch does; burn's kernel differs from them
+/// by that rounding (about 2e-6 relative).
+#[test]
+fn cpu_inference_kernel_matches_burn() {
+    let device = Device::flex();
+    let cases = CASES
+        .into_iter()
+        .chain([([16, 32], [32, 64]), ([31, 17], [62, 34])]);
+    for (from, to) in cases {
+        for align_corners in [true, false] {
+            let x = input(from[0], from[1], &device);
+            let d = max_abs_diff(
+                resize_bilinear(x.clone(), to, align_corners),
+                native(x, to, align_corners),
+            );
+            assert!(
+                d < 2e-5,
+                "{from:?} → {to:?}, align_corners {align_corners}: {d}"
+            );
+        }
+    }
+}
+
 #[test]
 fn gradients_match_the_kernel() {
     let device = Device::flex().autodiff();
