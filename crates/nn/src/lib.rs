@@ -46,6 +46,7 @@ pub mod dinov3;
 pub mod infer;
 mod matmul;
 pub mod monster;
+pub mod pool;
 pub mod profile;
 pub mod resize;
 pub mod segformer;

@@ -11,8 +11,6 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{PaddingConfig2d, Relu};
 use burn::tensor::activation::{sigmoid, tanh};
-use burn::tensor::module::avg_pool2d;
-use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use rayon::prelude::*;
@@ -21,6 +19,7 @@ use crate::conv::{
     conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, Activation, Epilogue, Geometry,
     Nchw,
 };
+use crate::pool::avg_pool2d_padded;
 use crate::resize::resize_bilinear;
 
 fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
@@ -32,13 +31,7 @@ fn conv(c_in: usize, c_out: usize, k: usize, device: &Device) -> Conv2d {
 
 /// `pool2x` = `avg_pool2d(k3, s2, p1)`, count_include_pad=True.
 pub fn pool2x(x: Tensor<4>) -> Tensor<4> {
-    avg_pool2d(
-        x,
-        AvgPoolOptions::new([3, 3])
-            .with_stride([2, 2])
-            .with_padding([1, 1])
-            .with_count_include_pad(true),
-    )
+    avg_pool2d_padded(x, 3, 2, 1)
 }
 
 /// `interp(x, dest)` = bilinear resize of `x` to the spatial size of `dest`, align_corners=True.
