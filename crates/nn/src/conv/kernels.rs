@@ -5,6 +5,7 @@
 
 use rayon::prelude::*;
 
+use super::prepared::LayerWeights;
 use super::scratch::{Scratch, COLUMNS, PADDED, WIDE};
 use crate::matmul::{gemm_f32, Strided};
 
@@ -131,18 +132,19 @@ impl<'a> Epilogue<'a> {
     }
 }
 
-/// Convolution of `input` (`shape`, NCHW) with `weight` (`[co, ci, kh, kw]`, row-major), then
+/// Convolution of `input` (`shape`, NCHW) with `weights` (`[co, ci, kh, kw]`), then
 /// `epilogue`. Returns the output (`[b, co, oh, ow]`) and `[oh, ow]`.
 pub fn conv2d_nchw(
     input: &[f32],
     shape: Nchw,
-    weight: &[f32],
+    weights: &LayerWeights,
     co: usize,
     geometry: Geometry,
     epilogue: Epilogue<'_>,
 ) -> (Vec<f32>, [usize; 2]) {
     let Nchw { b, c: ci, h, w } = shape;
     let [kh, kw] = geometry.kernel;
+    let weight = weights.raw();
     assert_eq!(input.len(), b * ci * h * w, "conv2d_nchw: input size");
     assert_eq!(weight.len(), co * ci * kh * kw, "conv2d_nchw: weight size");
     let [oh, ow] = geometry.output([h, w]);
@@ -152,7 +154,7 @@ pub fn conv2d_nchw(
         super::winograd::conv3x3(
             input,
             shape,
-            weight,
+            weights.winograd(),
             co,
             geometry.padding,
             epilogue,
@@ -161,7 +163,15 @@ pub fn conv2d_nchw(
     } else if geometry.stride == [1, 1] && co < MIN_TAP_CHANNELS && ci >= MIN_TAP_CHANNELS {
         conv_thin_output(input, shape, weight, co, geometry, epilogue, &mut out);
     } else if geometry.stride == [1, 1] && ci >= MIN_TAP_CHANNELS {
-        conv_taps(input, shape, weight, co, geometry, epilogue, &mut out);
+        conv_taps(
+            input,
+            shape,
+            weights.tap_major(),
+            co,
+            geometry,
+            epilogue,
+            &mut out,
+        );
     } else {
         conv_unfolded(input, shape, weight, co, geometry, &mut out);
         for image in out.chunks_exact_mut(co * oh * ow) {
@@ -174,11 +184,12 @@ pub fn conv2d_nchw(
 /// Stride 1: one GEMM per kernel tap. Each output row is computed over the whole padded width
 /// `wp`; for tap `(i, j)` the input it reads is the padded image shifted by `i·dh·wp + j·dw`,
 /// a plain strided matrix `[ci, oh·wp]` (row stride `hp·wp`). The `wp − ow` extra columns of
-/// each row are discarded when the epilogue writes `out`.
+/// each row are discarded when the epilogue writes `out`. `taps` is the weight tap-major
+/// ([`tap_weights`]).
 fn conv_taps(
     input: &[f32],
     shape: Nchw,
-    weight: &[f32],
+    taps: &[f32],
     co: usize,
     geometry: Geometry,
     epilogue: Epilogue<'_>,
@@ -194,7 +205,7 @@ fn conv_taps(
     // The taps' shifted views of the last channel read up to `span_w` values past the image
     // (only for the discarded columns): keep them inside the buffer.
     let plane = hp * wp;
-    let taps = tap_weights(weight, co, ci, kh * kw);
+    assert_eq!(taps.len(), kh * kw * co * ci, "conv_taps: weight size");
     let mut wide = Scratch::take(&WIDE, co * oh * wp);
     let mut padded = Scratch::take(&PADDED, ci * plane + span_w);
     padded[ci * plane..].fill(0.0);
@@ -474,7 +485,7 @@ pub fn conv_transpose2d_nchw(
 }
 
 /// `[co, ci, taps]` → `[taps, co, ci]`: one contiguous `co × ci` matrix per tap.
-fn tap_weights(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
+pub(super) fn tap_weights(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
     let mut out = vec![0.0f32; weight.len()];
     for (o, per_out) in weight.chunks_exact(ci * taps).enumerate() {
         for (i, per_in) in per_out.chunks_exact(taps).enumerate() {

@@ -12,8 +12,11 @@
 //! `forward`.
 
 mod kernels;
+mod prepared;
 mod scratch;
 mod winograd;
+
+use std::sync::Arc;
 
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::nn::{BatchNorm, PaddingConfig2d};
@@ -23,6 +26,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 pub use kernels::{
     conv2d_nchw, conv_transpose2d_nchw, Activation, Epilogue, Geometry, Nchw, TransposeGeometry,
 };
+pub(crate) use prepared::prepared;
+pub use prepared::{with_prepared_weights, LayerWeights};
 
 /// `conv.forward(x)`.
 pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
@@ -41,7 +46,15 @@ pub fn conv2d_fused(
         return burn_layers(conv.forward(x), bn, act);
     };
     let bias = conv.bias.as_ref().map(|b| b.val());
-    conv2d_with(x, conv.weight.val(), bias, geometry, bn, act)
+    conv2d_prepared(x, &layer_weights(conv), bias, geometry, bn, act)
+}
+
+/// `conv`'s weights for the kernels, prepared once per [`with_prepared_weights`] scope.
+pub fn layer_weights(conv: &Conv2d) -> Arc<LayerWeights> {
+    prepared(conv.weight.id, "conv2d", || {
+        let [co, _, kh, kw] = conv.weight.dims();
+        LayerWeights::new(f32_vec(conv.weight.val()), co, kh * kw)
+    })
 }
 
 /// [`conv2d_fused`] on bare tensors (`weight` `[co, ci, kh, kw]`), for layers that are not a
@@ -54,11 +67,24 @@ pub fn conv2d_with(
     bn: Option<&BatchNorm>,
     act: Activation,
 ) -> Tensor<4> {
+    let [co, _, kh, kw] = weight.dims();
+    let weights = LayerWeights::new(f32_vec(weight), co, kh * kw);
+    conv2d_prepared(x, &weights, bias, geometry, bn, act)
+}
+
+/// [`conv2d_with`] on prepared weights.
+fn conv2d_prepared(
+    x: Tensor<4>,
+    weights: &LayerWeights,
+    bias: Option<Tensor<1>>,
+    geometry: Geometry,
+    bn: Option<&BatchNorm>,
+    act: Activation,
+) -> Tensor<4> {
     let device = x.device();
     let [b, c, h, w] = x.dims();
-    let [co, _, _, _] = weight.dims();
+    let co = weights.co();
     let input = f32_vec(x);
-    let weight = f32_vec(weight);
     let (scale, shift) = affine(bias.map(f32_vec), bn);
     let epilogue = Epilogue {
         scale: scale.as_deref(),
@@ -66,7 +92,7 @@ pub fn conv2d_with(
         act,
     };
     let shape = Nchw { b, c, h, w };
-    let (out, [oh, ow]) = conv2d_nchw(&input, shape, &weight, co, geometry, epilogue);
+    let (out, [oh, ow]) = conv2d_nchw(&input, shape, weights, co, geometry, epilogue);
     Tensor::from_data(TensorData::new(out, [b, co, oh, ow]), &device)
 }
 

@@ -25,7 +25,7 @@ thread_local! {
 
 /// `weight` (`[co, ci, 3, 3]`) → `U = G·g·Gᵀ` per channel pair, stored `[co, 16, ci]`: the GEMM
 /// of element `e` reads its `[co, ci]` matrix at row stride `16·ci`.
-fn transform_weights(weight: &[f32], co: usize, ci: usize) -> Vec<f32> {
+pub(super) fn transform_weights(weight: &[f32], co: usize, ci: usize) -> Vec<f32> {
     let mut u = vec![0.0f32; 16 * co * ci];
     u.par_chunks_exact_mut(16 * ci)
         .zip(weight.par_chunks_exact(9 * ci))
@@ -51,12 +51,12 @@ fn transform_weights(weight: &[f32], co: usize, ci: usize) -> Vec<f32> {
     u
 }
 
-/// 3×3, stride 1, dilation 1 convolution of `input` (`shape`) with `weight` (`[co, ci, 3, 3]`),
-/// zero padding `[top, left, bottom, right]`, then `epilogue`, into `out` (`[b, co, oh, ow]`).
+/// 3×3, stride 1, dilation 1 convolution of `input` (`shape`) with the transformed weights `u`
+/// ([`transform_weights`] of `[co, ci, 3, 3]`), zero padding `[top, left, bottom, right]`, then `epilogue`, into `out` (`[b, co, oh, ow]`).
 pub(super) fn conv3x3(
     input: &[f32],
     shape: Nchw,
-    weight: &[f32],
+    u: &[f32],
     co: usize,
     [top, left, bottom, right]: [usize; 4],
     epilogue: Epilogue<'_>,
@@ -68,7 +68,7 @@ pub(super) fn conv3x3(
     let (th, tw) = (oh.div_ceil(2), ow.div_ceil(2));
     // Padded so that every tile's 4×4 patch is inside, odd output sizes included.
     let (hp, wp) = (2 * th + 2, 2 * tw + 2);
-    let u = transform_weights(weight, co, ci);
+    assert_eq!(u.len(), 16 * co * ci, "winograd: transformed weight size");
     let threads = rayon::current_num_threads();
     let rows_per_band = (BAND_TILES / tw).clamp(1, th.div_ceil(2 * threads).max(1));
     let mut padded = Scratch::take(&PADDED, ci * hp * wp);

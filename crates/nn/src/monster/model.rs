@@ -60,7 +60,7 @@ use super::vit::{normalize_image, DinoVisionTransformer};
 /// Profile group of the stereo feature stems and the GRU context.
 const STEMS: &str = "feature stems + context";
 use crate::config::MonsterConfig;
-use crate::conv::{conv2d_forward, conv_transpose2d_forward};
+use crate::conv::{conv2d_forward, conv_transpose2d_forward, with_prepared_weights};
 use crate::profile::span;
 use crate::resize::resize_bilinear;
 use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
@@ -198,6 +198,17 @@ impl Monster {
     ///
     /// Panics on a shape that violates these rules.
     pub fn forward(
+        &self,
+        left: Tensor<4>,
+        right: Tensor<4>,
+        iters: usize,
+        test_mode: bool,
+    ) -> MonsterOutput {
+        // The iteration loop runs its layers many times: prepare their weights once.
+        with_prepared_weights(|| self.forward_pass(left, right, iters, test_mode))
+    }
+
+    fn forward_pass(
         &self,
         left: Tensor<4>,
         right: Tensor<4>,

@@ -16,8 +16,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{
-    conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, Activation, Epilogue, Geometry,
-    Nchw,
+    conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, layer_weights, prepared,
+    Activation, Epilogue, Geometry, LayerWeights, Nchw,
 };
 use crate::pool::avg_pool2d_padded;
 use crate::resize::resize_bilinear;
@@ -119,7 +119,6 @@ impl ConvGru {
             }
         }
         drop(xs);
-        let weights = |c: &Conv2d| f32_vec(c.weight.val());
         let biases =
             |c: &Conv2d| f32_vec(c.bias.as_ref().expect("checked by fused_geometry").val());
         let shape = Nchw {
@@ -128,11 +127,11 @@ impl ConvGru {
             h: height,
             w: width,
         };
-        let conv = |input: &[f32], weight: &[f32], bias: &[f32], co: usize| {
+        let conv = |input: &[f32], weights: &LayerWeights, bias: &[f32], co: usize| {
             let (out, size) = conv2d_nchw(
                 input,
                 shape,
-                weight,
+                weights,
                 co,
                 geometry,
                 Epilogue::bias(Some(bias)),
@@ -141,9 +140,18 @@ impl ConvGru {
             out
         };
         let [cz, cr, cq] = ctx.clone().map(f32_vec);
+        // convz and convr stacked into one layer of 2·hidden outputs.
+        let zr_weights = prepared(self.convz.weight.id, "convz+convr", || {
+            let raw = [&self.convz, &self.convr].map(|c| f32_vec(c.weight.val()));
+            LayerWeights::new(
+                raw.concat(),
+                2 * hidden,
+                geometry.kernel[0] * geometry.kernel[1],
+            )
+        });
         let zr = conv(
             &hx,
-            &[weights(&self.convz), weights(&self.convr)].concat(),
+            &zr_weights,
             &[biases(&self.convz), biases(&self.convr)].concat(),
             2 * hidden,
         );
@@ -167,7 +175,12 @@ impl ConvGru {
                 .for_each(|(((rh, &v), &c), &h)| *rh = sigmoid_f32(v + c) * h);
         }
         drop(zr);
-        let mut q = conv(&hx, &weights(&self.convq), &biases(&self.convq), hidden);
+        let mut q = conv(
+            &hx,
+            &layer_weights(&self.convq),
+            &biases(&self.convq),
+            hidden,
+        );
         q.par_iter_mut()
             .zip(&cq)
             .zip(&z)
