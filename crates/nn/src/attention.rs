@@ -10,6 +10,7 @@ use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{f32_vec, on_cpu_inference};
+use crate::fastmath;
 use crate::matmul::{gemm_f32, SharedOut, Strided};
 
 /// Self-attention of `qkv` (`[b, n, 3e]`: q, k, v, each `heads × e/heads`, as PyTorch's
@@ -51,7 +52,7 @@ pub fn attention_qkv(qkv: Tensor<3>, heads: usize, scale: f32) -> Tensor<3> {
             let max = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
             let mut sum = 0.0f32;
             for s in row.iter_mut() {
-                *s = (*s - max).exp();
+                *s = fastmath::exp(*s - max);
                 sum += *s;
             }
             for s in row.iter_mut() {
@@ -100,7 +101,7 @@ fn erf(x: f32) -> f32 {
     let poly = t
         * (0.254_829_6
             + t * (-0.284_496_74 + t * (1.421_413_8 + t * (-1.453_152_1 + t * 1.061_405_4))));
-    let y = 1.0 - poly * (-a * a).exp();
+    let y = 1.0 - poly * fastmath::exp(-a * a);
     y.copysign(x)
 }
 

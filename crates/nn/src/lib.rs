@@ -43,6 +43,7 @@ pub mod config;
 pub mod conv;
 pub mod device;
 pub mod dinov3;
+pub mod fastmath;
 pub mod infer;
 mod matmul;
 pub mod monster;

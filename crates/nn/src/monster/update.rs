@@ -19,6 +19,7 @@ use crate::conv::{
     conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, layer_weights, prepared,
     Activation, Epilogue, Geometry, LayerWeights, Nchw,
 };
+use crate::fastmath;
 use crate::pool::avg_pool2d_padded;
 use crate::resize::resize_bilinear;
 
@@ -167,12 +168,12 @@ impl ConvGru {
                 .par_iter_mut()
                 .zip(zs)
                 .zip(&cz[at.clone()])
-                .for_each(|((z, &v), &c)| *z = sigmoid_f32(v + c));
+                .for_each(|((z, &v), &c)| *z = fastmath::sigmoid(v + c));
             rh.par_iter_mut()
                 .zip(rs)
                 .zip(&cr[at.clone()])
                 .zip(&h[at])
-                .for_each(|(((rh, &v), &c), &h)| *rh = sigmoid_f32(v + c) * h);
+                .for_each(|(((rh, &v), &c), &h)| *rh = fastmath::sigmoid(v + c) * h);
         }
         drop(zr);
         let mut q = conv(
@@ -185,13 +186,9 @@ impl ConvGru {
             .zip(&cq)
             .zip(&z)
             .zip(&h)
-            .for_each(|(((q, &c), &z), &h)| *q = (1.0 - z) * h + z * (*q + c).tanh());
+            .for_each(|(((q, &c), &z), &h)| *q = (1.0 - z) * h + z * fastmath::tanh(*q + c));
         Tensor::from_data(TensorData::new(q, [b, hidden, height, width]), &device)
     }
-}
-
-fn sigmoid_f32(v: f32) -> f32 {
-    1.0 / (1.0 + (-v).exp())
 }
 
 /// Upstream `DispHead(C, 256, 1)`: `conv2(relu(conv1(x)))`, both 3×3.
