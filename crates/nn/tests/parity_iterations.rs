@@ -6,30 +6,16 @@
 
 mod support;
 
+use support::tiny::{Parts, FIXTURE};
 use support::Fixture;
 
-use burn::module::Module;
-use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d};
-use burn::nn::PaddingConfig2d;
-use burn::tensor::activation::{relu, tanh};
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Tensor;
 
-use nn::monster::features::BasicConvIn;
-use nn::monster::geometry::GeoEncodingVolume;
-use nn::monster::remp::Remp;
 use nn::monster::scale_shift::align_mono;
-use nn::monster::update::{
-    iterate, iterate_traced, BasicMultiUpdateBlock, BasicMultiUpdateBlockMix2, GruContext,
-    IterationBlocks, IterationInputs,
-};
-use nn::monster::upsample::{freeze_bn, spx_gru_init, upsample_disp, Conv2x};
+use nn::monster::update::{iterate, iterate_traced};
+use nn::monster::upsample::{freeze_bn, upsample_disp};
 use nn::monster::warp::disp_warp;
-use nn::weights::load_submodule;
 
-const FIXTURE: &str = "monsterpp-tiny";
-const HIDDEN: usize = 32;
 const ITERS: usize = 8;
 
 impl Fixture {
@@ -49,125 +35,6 @@ impl Fixture {
     }
 }
 
-fn weights() -> std::path::PathBuf {
-    support::fixture_dir(FIXTURE).join("weights.safetensors")
-}
-
-fn load<M: Module>(mut m: M, prefix: &str) -> M {
-    load_submodule(&mut m, weights(), prefix).unwrap_or_else(|e| panic!("{prefix}: {e}"));
-    m
-}
-
-struct Parts {
-    update_block: BasicMultiUpdateBlock,
-    mix_stereo: BasicMultiUpdateBlockMix2,
-    mix_mono: BasicMultiUpdateBlockMix2,
-    spx_2_gru: Conv2x,
-    spx_gru: Vec<ConvTranspose2d>,
-    remp: Remp,
-    zqr: Vec<Conv2d>,
-    conv: BasicConvIn,
-    desc: Conv2d,
-}
-
-impl Parts {
-    fn load(device: &Device) -> Self {
-        let zqr = (0..3)
-            .map(|_| {
-                Conv2dConfig::new([HIDDEN, 3 * HIDDEN], [3, 3])
-                    .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
-                    .init(device)
-            })
-            .collect::<Vec<_>>();
-        Self {
-            update_block: load(
-                BasicMultiUpdateBlock::new(HIDDEN, 162, device),
-                "update_block.",
-            ),
-            mix_stereo: load(
-                BasicMultiUpdateBlockMix2::new(HIDDEN, 162, 96, device),
-                "update_block_mix_stereo.",
-            ),
-            mix_mono: load(
-                BasicMultiUpdateBlockMix2::new(HIDDEN, 162, 96, device),
-                "update_block_mix_mono.",
-            ),
-            spx_2_gru: load(Conv2x::new(32, 32, device), "spx_2_gru."),
-            spx_gru: load(spx_gru_init(device), "spx_gru."),
-            remp: load(Remp::new(device), "REMP."),
-            zqr: load(zqr, "context_zqr_convs."),
-            conv: load(BasicConvIn::new(96, 96, 3, 1, 1, device), "conv."),
-            desc: load(Conv2dConfig::new([96, 96], [1, 1]).init(device), "desc."),
-        }
-    }
-
-    fn blocks(&self) -> IterationBlocks<'_> {
-        IterationBlocks {
-            update_block: &self.update_block,
-            update_block_mix_stereo: &self.mix_stereo,
-            update_block_mix_mono: &self.mix_mono,
-            spx_2_gru: &self.spx_2_gru,
-            spx_gru: &self.spx_gru[0],
-            remp: &self.remp,
-        }
-    }
-}
-
-/// features[0] of one side (`0` left, `1` right): `cat(feat_transfer_0, stem_4)`.
-fn features0(fx: &Fixture, side: usize) -> Tensor<4> {
-    Tensor::cat(
-        vec![
-            fx.t::<4>(&format!("inter.feat_transfer_0.{side}")),
-            fx.t::<4>(&format!("inter.stem_4.{side}")),
-        ],
-        1,
-    )
-}
-
-fn inputs(fx: &Fixture, parts: &Parts) -> IterationInputs {
-    let fl = features0(fx, 0);
-    let fr = features0(fx, 1);
-    let ml = parts.desc.forward(parts.conv.forward(fl.clone()));
-    let mr = parts.desc.forward(parts.conv.forward(fr.clone()));
-    let geo = GeoEncodingVolume::new(ml, mr, fx.t::<5>("inter.cost_agg.0"), 4, 2);
-    let cnet: Vec<Tensor<4>> = (0..3)
-        .map(|i| fx.t::<4>(&format!("inter.cnet_{i}.0")))
-        .collect();
-    let net = [
-        tanh(cnet[0].clone()),
-        tanh(cnet[1].clone()),
-        tanh(cnet[2].clone()),
-    ];
-    let inp: Vec<GruContext> = cnet
-        .iter()
-        .zip(&parts.zqr)
-        .map(|(c, conv)| {
-            let v = conv.forward(relu(c.clone())).split(HIDDEN, 1);
-            [v[0].clone(), v[1].clone(), v[2].clone()]
-        })
-        .collect();
-    let depth_mono = fx.t::<4>("output.depth_mono");
-    let [_, _, h, w] = depth_mono.dims();
-    let disp_mono_4x = interpolate(
-        depth_mono,
-        InterpolateOptions::new(InterpolateMode::Bilinear)
-            .with_align_corners(false)
-            .with_output_size([h / 4, w / 4]),
-    );
-    IterationInputs {
-        geo,
-        init_disp: fx.t::<4>("inter.init_disp_q.0"),
-        disp_mono_4x,
-        net,
-        inp: [inp[0].clone(), inp[1].clone(), inp[2].clone()],
-        features_left0: fl,
-        features_right0: fr,
-        stem_2x: fx.t::<4>("inter.stem_2.0"),
-        image1: fx.image("left"),
-        image2: fx.image("right"),
-    }
-}
-
 /// `compute_scale_shift` is discontinuous (sort, strict masks) and mildly ill-conditioned: compare
 /// relatively (measured: 2.4e-6 on the scale, exact on the shift).
 fn check_scale_shift(got: (f32, f32), want: &[f32]) {
@@ -183,7 +50,7 @@ fn stages_in_isolation() {
     let fx = Fixture::load(FIXTURE);
     let dev = fx.device.clone();
     let parts = Parts::load(&dev);
-    let inp = inputs(&fx, &parts);
+    let inp = parts.inputs(&fx);
 
     // Geo encoding lookup at the initial disparity.
     let init = fx.t::<4>("inter.init_disp_q.0");
@@ -247,20 +114,14 @@ fn iterations_end_to_end() {
 
     let t0 = std::time::Instant::now();
     let mut worst: Vec<(String, f32)> = Vec::new();
-    let out = iterate_traced(
-        &blocks,
-        inputs(&fx, &parts),
-        ITERS,
-        false,
-        &mut |name, t| {
-            let key = format!("inter.{name}");
-            if fx.tensors.contains_key(&key) {
-                let (e, s) = fx.err(t, &key);
-                println!("{key:<45} max abs err {e:.3e}  (max |ref| {s:.3e})");
-                worst.push((key, e));
-            }
-        },
-    );
+    let out = iterate_traced(&blocks, parts.inputs(&fx), ITERS, false, &mut |name, t| {
+        let key = format!("inter.{name}");
+        if fx.tensors.contains_key(&key) {
+            let (e, s) = fx.err(t, &key);
+            println!("{key:<45} max abs err {e:.3e}  (max |ref| {s:.3e})");
+            worst.push((key, e));
+        }
+    });
     println!("train-mode loop: {:.2?}", t0.elapsed());
     for (k, e) in &worst {
         let tol = if k.contains("upsample_disp") || k.contains("REMP") {
@@ -279,7 +140,7 @@ fn iterations_end_to_end() {
     fx.check(&out.disp, "output.disp", 1e-3);
 
     let t0 = std::time::Instant::now();
-    let test = iterate(&blocks, inputs(&fx, &parts), ITERS, true);
+    let test = iterate(&blocks, parts.inputs(&fx), ITERS, true);
     println!("test-mode loop: {:.2?}", t0.elapsed());
     assert!(test.disp_preds.is_empty());
     fx.check(&test.disp, "output.disp", 1e-3);
@@ -301,7 +162,7 @@ fn iterations_backward_smoke() {
         tensors: fx.tensors.clone(),
         device: ad.clone(),
     };
-    let out = iterate(&parts.blocks(), inputs(&fx_ad, &parts), ITERS, false);
+    let out = iterate(&parts.blocks(), parts.inputs(&fx_ad), ITERS, false);
     let loss = out
         .disp_preds
         .iter()

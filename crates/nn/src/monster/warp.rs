@@ -32,7 +32,12 @@ pub fn disp_warp_grid(disp: Tensor<4>) -> Tensor<4> {
         .mul_scalar(2.0)
         .sub_scalar(1.0)
         .expand([b, 1, h, w]);
-    Tensor::cat(vec![gx, gy], 1).permute([0, 2, 3, 1])
+    // Concatenated along the last axis (a fresh, contiguous `[B, H, W, 2]`), not permuted from
+    // `[B, 2, H, W]`: burn-cubecl's `grid_sample` kernel (wgpu/CUDA, burn 0.22.1) reads `gy` at
+    // `grid[offset + 1]`, ignoring the grid's last-axis stride, so a permuted view samples the
+    // wrong rows there.
+    let [gx, gy] = [gx, gy].map(|g| g.permute([0, 2, 3, 1]));
+    Tensor::cat(vec![gx, gy], 3)
 }
 
 /// Upstream `disp_warp(img, disp)[0]`: `img` `[B, C, H, W]`, `disp` `[B, 1, H, W]` (positive,

@@ -1,6 +1,8 @@
 //! Reading the upstream parity fixtures (`../shared/fixtures/*`) in place.
 #![allow(dead_code)]
 
+pub mod tiny;
+
 use std::path::PathBuf;
 
 use std::collections::HashMap;
