@@ -143,14 +143,7 @@ fn end_to_end_parity_train_mode() {
     assert_eq!(out.disp_preds.len(), fx.raw("output.disp_preds").0[0]);
     let preds = Tensor::stack::<5>(out.disp_preds.clone(), 0);
     fx.check(&preds, "output.disp_preds", 1e-3);
-    // Per prediction, to see where the error grows.
-    let (_, all) = fx.raw("output.disp_preds");
-    let per = all.len() / out.disp_preds.len();
-    for (i, p) in out.disp_preds.iter().enumerate() {
-        let got: Vec<f32> = p.to_data().try_to_vec::<f32>().unwrap();
-        let (e, _) = support::max_abs_diff(&got, &all[i * per..(i + 1) * per]);
-        println!("  disp_preds[{i:2}] max abs err {e:.3e}");
-    }
+    support::print_prediction_errors(&out.disp_preds, &fx.raw("output.disp_preds").1);
     let last = out.disp_preds.last().unwrap().clone();
     let same: f32 = (last - out.disp.clone()).abs().max().into_scalar();
     assert_eq!(same, 0.0, "the last prediction is the output");

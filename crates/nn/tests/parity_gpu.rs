@@ -419,13 +419,7 @@ fn monsterpp_tiny_end_to_end() {
             "output.init_disp_up",
             Tol::DISP_END,
         );
-        let (_, all) = fx.raw("output.disp_preds");
-        let per = all.len() / out.disp_preds.len();
-        for (i, p) in out.disp_preds.iter().enumerate() {
-            let got: Vec<f32> = p.to_data().try_to_vec::<f32>().unwrap();
-            let (e, _) = support::max_abs_diff(&got, &all[i * per..(i + 1) * per]);
-            println!("  disp_preds[{i:2}] max abs err {e:.3e}");
-        }
+        support::print_prediction_errors(&out.disp_preds, &fx.raw("output.disp_preds").1);
         let (max, mean) = err(&fx, "END-TO-END disp", &out.disp, "output.disp");
         println!("{name}: end to end max {max:.3e} px, mean {mean:.3e} px");
         assert!(max <= Tol::DISP_END, "end to end: {max:e} px");

@@ -138,13 +138,12 @@ pub fn conv2d_nchw(
     input: &[f32],
     shape: Nchw,
     weights: &LayerWeights,
-    co: usize,
     geometry: Geometry,
     epilogue: Epilogue<'_>,
 ) -> (Vec<f32>, [usize; 2]) {
     let Nchw { b, c: ci, h, w } = shape;
     let [kh, kw] = geometry.kernel;
-    let weight = weights.raw();
+    let (weight, co) = (weights.raw(), weights.co());
     assert_eq!(input.len(), b * ci * h * w, "conv2d_nchw: input size");
     assert_eq!(weight.len(), co * ci * kh * kw, "conv2d_nchw: weight size");
     let [oh, ow] = geometry.output([h, w]);

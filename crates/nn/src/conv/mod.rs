@@ -92,7 +92,7 @@ fn conv2d_prepared(
         act,
     };
     let shape = Nchw { b, c, h, w };
-    let (out, [oh, ow]) = conv2d_nchw(&input, shape, weights, co, geometry, epilogue);
+    let (out, [oh, ow]) = conv2d_nchw(&input, shape, weights, geometry, epilogue);
     Tensor::from_data(TensorData::new(out, [b, co, oh, ow]), &device)
 }
 

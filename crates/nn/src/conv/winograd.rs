@@ -52,7 +52,8 @@ pub(super) fn transform_weights(weight: &[f32], co: usize, ci: usize) -> Vec<f32
 }
 
 /// 3×3, stride 1, dilation 1 convolution of `input` (`shape`) with the transformed weights `u`
-/// ([`transform_weights`] of `[co, ci, 3, 3]`), zero padding `[top, left, bottom, right]`, then `epilogue`, into `out` (`[b, co, oh, ow]`).
+/// ([`transform_weights`] of `[co, ci, 3, 3]`), zero padding `[top, left, bottom, right]`, then
+/// `epilogue`, into `out` (`[b, co, oh, ow]`).
 pub(super) fn conv3x3(
     input: &[f32],
     shape: Nchw,

@@ -128,15 +128,9 @@ impl ConvGru {
             h: height,
             w: width,
         };
-        let conv = |input: &[f32], weights: &LayerWeights, bias: &[f32], co: usize| {
-            let (out, size) = conv2d_nchw(
-                input,
-                shape,
-                weights,
-                co,
-                geometry,
-                Epilogue::bias(Some(bias)),
-            );
+        let conv = |input: &[f32], weights: &LayerWeights, bias: &[f32]| {
+            let (out, size) =
+                conv2d_nchw(input, shape, weights, geometry, Epilogue::bias(Some(bias)));
             debug_assert_eq!(size, [height, width], "a same-size convolution");
             out
         };
@@ -154,7 +148,6 @@ impl ConvGru {
             &hx,
             &zr_weights,
             &[biases(&self.convz), biases(&self.convr)].concat(),
-            2 * hidden,
         );
         // z stays in the first half of `zr`; `r·h` replaces `h` in the input of convq.
         let mut z = vec![0.0f32; b * hidden * plane];
@@ -176,12 +169,7 @@ impl ConvGru {
                 .for_each(|(((rh, &v), &c), &h)| *rh = fastmath::sigmoid(v + c) * h);
         }
         drop(zr);
-        let mut q = conv(
-            &hx,
-            &layer_weights(&self.convq),
-            &biases(&self.convq),
-            hidden,
-        );
+        let mut q = conv(&hx, &layer_weights(&self.convq), &biases(&self.convq));
         q.par_iter_mut()
             .zip(&cq)
             .zip(&z)

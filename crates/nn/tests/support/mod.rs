@@ -145,3 +145,15 @@ pub fn write_edited_weights(
         .collect();
     std::fs::write(path, safetensors::serialize(views, None).unwrap()).unwrap();
 }
+
+/// Prints each prediction's max abs error against its slice of `reference` (the fixture's
+/// `output.disp_preds`, all predictions stacked), to see where the error grows along the
+/// iterations.
+pub fn print_prediction_errors(preds: &[Tensor<4>], reference: &[f32]) {
+    let per = reference.len() / preds.len();
+    for (i, p) in preds.iter().enumerate() {
+        let got: Vec<f32> = p.to_data().try_to_vec::<f32>().unwrap();
+        let (e, _) = max_abs_diff(&got, &reference[i * per..(i + 1) * per]);
+        println!("  disp_preds[{i:2}] max abs err {e:.3e}");
+    }
+}
