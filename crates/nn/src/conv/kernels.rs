@@ -315,9 +315,6 @@ fn conv_unfolded(
 ) {
     let Nchw { b, c: ci, h, w } = shape;
     let [kh, kw] = geometry.kernel;
-    let [top, left, _, _] = geometry.padding;
-    let [sh, sw] = geometry.stride;
-    let [dh, dw] = geometry.dilation;
     let [oh, ow] = geometry.output([h, w]);
     let k = ci * kh * kw;
     let rows_per_band = (COLUMN_FLOATS / (k * ow)).clamp(1, oh);
@@ -327,31 +324,14 @@ fn conv_unfolded(
         for r0 in (0..oh).step_by(rows_per_band) {
             let rows = rows_per_band.min(oh - r0);
             let pixels = rows * ow;
-            columns[..k * pixels]
-                .par_chunks_exact_mut(pixels)
-                .enumerate()
-                .for_each(|(row, dst)| {
-                    let (c, i, j) = (row / (kh * kw), (row / kw) % kh, row % kw);
-                    let plane = &image[c * h * w..(c + 1) * h * w];
-                    // Output columns whose input column `ox·sw + j·dw − left` is inside the image.
-                    let x0 = (left.saturating_sub(j * dw)).div_ceil(sw).min(ow);
-                    let x1 = ((w + left).saturating_sub(j * dw))
-                        .div_ceil(sw)
-                        .clamp(x0, ow);
-                    for (r, d) in dst.chunks_exact_mut(ow).enumerate() {
-                        let y = ((r0 + r) * sh + i * dh) as isize - top as isize;
-                        if y < 0 || y >= h as isize {
-                            d.fill(0.0);
-                            continue;
-                        }
-                        let src = &plane[y as usize * w..][..w];
-                        d[..x0].fill(0.0);
-                        d[x1..].fill(0.0);
-                        for (ox, d) in (x0..x1).zip(&mut d[x0..x1]) {
-                            *d = src[ox * sw + j * dw - left];
-                        }
-                    }
-                });
+            unfold_rows(
+                image,
+                [ci, h, w],
+                geometry,
+                r0,
+                rows,
+                &mut columns[..k * pixels],
+            );
             // SAFETY: dst is `co × pixels` at row stride `oh·ow` inside this image's output;
             // lhs is `[co, k]` row-major; rhs is `[k, pixels]` row-major inside `columns`.
             unsafe {
@@ -368,6 +348,50 @@ fn conv_unfolded(
         }
     }
     columns.give_back(&COLUMNS);
+}
+
+/// The im2col of output rows `r0..r0 + rows` of one image (`[c, h, w]`) into `dst`
+/// (`[c·kh·kw, rows·ow]`): row `(c, i, j)` holds, for each of those output pixels, the input
+/// value that tap `(i, j)` of channel `c` reads (zero in the padding).
+pub(super) fn unfold_rows(
+    image: &[f32],
+    [c, h, w]: [usize; 3],
+    geometry: Geometry,
+    r0: usize,
+    rows: usize,
+    dst: &mut [f32],
+) {
+    let [kh, kw] = geometry.kernel;
+    let [top, left, _, _] = geometry.padding;
+    let [sh, sw] = geometry.stride;
+    let [dh, dw] = geometry.dilation;
+    let ow = geometry.output([h, w])[1];
+    let pixels = rows * ow;
+    assert_eq!(dst.len(), c * kh * kw * pixels, "unfold_rows: buffer size");
+    dst.par_chunks_exact_mut(pixels)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let (c, i, j) = (row / (kh * kw), (row / kw) % kh, row % kw);
+            let plane = &image[c * h * w..(c + 1) * h * w];
+            // Output columns whose input column `ox·sw + j·dw − left` is inside the image.
+            let x0 = (left.saturating_sub(j * dw)).div_ceil(sw).min(ow);
+            let x1 = ((w + left).saturating_sub(j * dw))
+                .div_ceil(sw)
+                .clamp(x0, ow);
+            for (r, d) in dst.chunks_exact_mut(ow).enumerate() {
+                let y = ((r0 + r) * sh + i * dh) as isize - top as isize;
+                if y < 0 || y >= h as isize {
+                    d.fill(0.0);
+                    continue;
+                }
+                let src = &plane[y as usize * w..][..w];
+                d[..x0].fill(0.0);
+                d[x1..].fill(0.0);
+                for (ox, d) in (x0..x1).zip(&mut d[x0..x1]) {
+                    *d = src[ox * sw + j * dw - left];
+                }
+            }
+        });
 }
 
 /// Kernel size, stride, padding `[ph, pw]` (removed from both sides), dilation and extra

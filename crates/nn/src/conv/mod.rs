@@ -11,9 +11,11 @@
 //! groups, `Same` padding) keeps burn's layers, so the functions here are drop-ins for
 //! `forward`.
 
+mod gradients;
 mod kernels;
 mod prepared;
 mod scratch;
+mod trainable;
 mod winograd;
 
 use std::sync::Arc;
@@ -42,11 +44,18 @@ pub fn conv2d_fused(
     act: Activation,
     x: Tensor<4>,
 ) -> Tensor<4> {
-    let Some(geometry) = geometry(conv, &x) else {
-        return burn_layers(conv.forward(x), bn, act);
-    };
     let bias = conv.bias.as_ref().map(|b| b.val());
-    conv2d_prepared(x, &layer_weights(conv), bias, geometry, bn, act)
+    match (layer_geometry(conv), cpu_mode(&x)) {
+        (Some(geometry), Some(CpuMode::Inference)) => {
+            conv2d_prepared(x, &layer_weights(conv), bias, geometry, bn, act)
+        }
+        (Some(geometry), Some(CpuMode::Training)) => burn_layers(
+            trainable::conv2d(x, conv.weight.val(), bias, geometry),
+            bn,
+            act,
+        ),
+        _ => burn_layers(conv.forward(x), bn, act),
+    }
 }
 
 /// `conv`'s weights for the kernels, prepared once per [`with_prepared_weights`] scope.
@@ -161,7 +170,12 @@ pub fn conv_transpose2d_with(
 /// The kernels' geometry of `conv` on `x` when they apply: the CPU inference device, one
 /// group, explicit or no padding.
 pub fn geometry(conv: &Conv2d, x: &Tensor<4>) -> Option<Geometry> {
-    if conv.groups != 1 || !on_cpu_inference(x) {
+    layer_geometry(conv).filter(|_| on_cpu_inference(x))
+}
+
+/// The kernels' geometry of `conv` when they can run it: one group, explicit or no padding.
+fn layer_geometry(conv: &Conv2d) -> Option<Geometry> {
+    if conv.groups != 1 {
         return None;
     }
     let padding = match conv.padding {
@@ -177,11 +191,31 @@ pub fn geometry(conv: &Conv2d, x: &Tensor<4>) -> Option<Geometry> {
     })
 }
 
+/// How the kernels run on a CPU tensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum CpuMode {
+    /// Plain values: fused epilogues, weights prepared once per pass.
+    Inference,
+    /// Under autodiff: the kernels as a burn operation with their backward.
+    Training,
+}
+
+/// Whether `x` is on the CPU device, and with or without autodiff.
+fn cpu_mode<const D: usize>(x: &Tensor<D>) -> Option<CpuMode> {
+    let device = x.device();
+    (device == Device::flex()).then(|| {
+        if device.is_autodiff() {
+            CpuMode::Training
+        } else {
+            CpuMode::Inference
+        }
+    })
+}
+
 /// The plain CPU device without autodiff (device equality ignores the autodiff wrapper: it is
 /// asked separately).
 pub fn on_cpu_inference<const D: usize>(x: &Tensor<D>) -> bool {
-    let device = x.device();
-    !device.is_autodiff() && device == Device::flex()
+    cpu_mode(x) == Some(CpuMode::Inference)
 }
 
 /// Per-channel `(scale, shift)` of `bn(y + bias)`: `scale = γ/√(σ²+ε)`,

@@ -1,0 +1,428 @@
+//! The convolution kernels as a burn backend operation, so that training on the CPU runs them
+//! too, forward and backward.
+//!
+//! Why: under autodiff the layers fell back to burn's CPU convolution, whose forward (im2col
+//! tiles, NHWC conversions, fresh buffers) and backward (a transposed convolution for the input,
+//! another im2col pass for the weight) made two-thirds of a MonSter++ training step
+//! (BENCHMARKS.md, "Training step"). [`conv2d`] is a burn extension operation (`Flex`, and
+//! `Autodiff<Flex>` with a hand-written backward on [`super::gradients`]); other dtypes fall back
+//! to burn's own convolution and its gradients.
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::NodeId;
+use burn::backend::flex::FlexTensor;
+use burn::backend::ops::{ConvOptions, ModuleOps};
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
+use burn::tensor::{DType, Tensor, TensorData};
+
+use super::gradients::{bias_grad, conv2d_input_grad, conv2d_weight_grad};
+use super::kernels::{conv2d_nchw, Epilogue, Geometry, Nchw};
+use super::prepared::LayerWeights;
+
+/// `conv2d(x, weight, bias)` (one group, explicit padding) on the kernels, differentiable where
+/// `x` tracks gradients. Only for the CPU device (`Flex`, with or without autodiff).
+pub fn conv2d(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    geometry: Geometry,
+) -> Tensor<4> {
+    let [top, left, bottom, right] = geometry.padding;
+    let options = ConvOptions::new_with_padding(
+        geometry.stride,
+        [(top, bottom), (left, right)],
+        geometry.dilation,
+        1,
+    );
+    let (x, weight) = (x.into_dispatch(), weight.into_dispatch());
+    Tensor::from_dispatch(match bias {
+        Some(bias) => {
+            <Dispatch as ConvKernels>::kernel_conv2d_bias(x, weight, bias.into_dispatch(), options)
+        }
+        None => <Dispatch as ConvKernels>::kernel_conv2d(x, weight, options),
+    })
+}
+
+#[backend_extension(Flex, Autodiff)]
+pub trait ConvKernels: Backend {
+    /// A one-group 2-D convolution on the kernels.
+    fn kernel_conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+
+    /// [`kernel_conv2d`](Self::kernel_conv2d) plus a bias (the extension macro of burn 0.22.1
+    /// does not route an `Option` of a tensor).
+    fn kernel_conv2d_bias(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+}
+
+/// The gradients of [`ConvKernels::kernel_conv2d`] on a backend that has the kernels.
+pub trait ConvGradKernels: Backend {
+    fn kernel_conv2d_x_grad(
+        x: &FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+    fn kernel_conv2d_weight_grad(
+        x: FloatTensor<Self>,
+        weight: &FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+    fn kernel_conv2d_bias_grad(grad: FloatTensor<Self>) -> FloatTensor<Self>;
+}
+
+fn geometry_of(options: &ConvOptions<2>, weight: &FlexTensor) -> Geometry {
+    let dims = weight.layout().shape();
+    let [(top, bottom), (left, right)] = options.padding;
+    Geometry {
+        kernel: [dims[2], dims[3]],
+        stride: options.stride,
+        padding: [top, left, bottom, right],
+        dilation: options.dilation,
+    }
+}
+
+fn dims4(t: &FlexTensor) -> [usize; 4] {
+    let s = t.layout().shape();
+    [s[0], s[1], s[2], s[3]]
+}
+
+/// The tensor's values in row-major order, copied only where its layout is not contiguous.
+fn values(t: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
+    match t.as_slice::<f32>() {
+        Some(v) => std::borrow::Cow::Borrowed(v),
+        None => std::borrow::Cow::Owned(
+            t.to_contiguous()
+                .as_slice::<f32>()
+                .expect("a contiguous f32 tensor")
+                .to_vec(),
+        ),
+    }
+}
+
+fn tensor(values: Vec<f32>, shape: impl Into<burn::tensor::Shape>) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
+
+fn all_f32<'a>(tensors: impl IntoIterator<Item = &'a FlexTensor>) -> bool {
+    tensors.into_iter().all(|t| t.dtype() == DType::F32)
+}
+
+impl ConvKernels for Flex {
+    fn kernel_conv2d(x: FlexTensor, weight: FlexTensor, options: ConvOptions<2>) -> FlexTensor {
+        flex_conv2d(x, weight, None, options)
+    }
+
+    fn kernel_conv2d_bias(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        flex_conv2d(x, weight, Some(bias), options)
+    }
+}
+
+/// [`ConvKernels::kernel_conv2d`] on `Flex`: burn's convolution for other dtypes.
+fn flex_conv2d(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: ConvOptions<2>,
+) -> FlexTensor {
+    if !all_f32([&x, &weight].into_iter().chain(&bias)) {
+        return <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
+    }
+    let [b, c, h, w] = dims4(&x);
+    let [co, _, kh, kw] = dims4(&weight);
+    let geometry = geometry_of(&options, &weight);
+    let weights = LayerWeights::new(values(&weight).into_owned(), co, kh * kw);
+    let bias = bias.as_ref().map(values);
+    let (out, [oh, ow]) = conv2d_nchw(
+        &values(&x),
+        Nchw { b, c, h, w },
+        &weights,
+        geometry,
+        Epilogue::bias(bias.as_deref()),
+    );
+    tensor(out, [b, co, oh, ow])
+}
+
+impl ConvGradKernels for Flex {
+    fn kernel_conv2d_x_grad(
+        x: &FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        if !all_f32([x, &weight, &grad]) {
+            return <Flex as ModuleOps<Flex>>::conv2d_x_backward(x.clone(), weight, grad, options);
+        }
+        let [b, ci, h, w] = dims4(x);
+        let [_, co, oh, ow] = dims4(&grad);
+        let geometry = geometry_of(&options, &weight);
+        let shape = Nchw {
+            b,
+            c: co,
+            h: oh,
+            w: ow,
+        };
+        let out = conv2d_input_grad(
+            &values(&grad),
+            shape,
+            &values(&weight),
+            ci,
+            [h, w],
+            geometry,
+        );
+        tensor(out, [b, ci, h, w])
+    }
+
+    fn kernel_conv2d_weight_grad(
+        x: FlexTensor,
+        weight: &FlexTensor,
+        grad: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        if !all_f32([&x, weight, &grad]) {
+            return <Flex as ModuleOps<Flex>>::conv2d_weight_backward(
+                x,
+                weight.clone(),
+                grad,
+                options,
+            );
+        }
+        let [b, c, h, w] = dims4(&x);
+        let dims = dims4(weight);
+        let geometry = geometry_of(&options, weight);
+        let out = conv2d_weight_grad(
+            &values(&x),
+            Nchw { b, c, h, w },
+            &values(&grad),
+            dims[0],
+            geometry,
+        );
+        tensor(out, dims)
+    }
+
+    fn kernel_conv2d_bias_grad(grad: FlexTensor) -> FlexTensor {
+        if !all_f32([&grad]) {
+            return <Flex as burn::backend::ops::FloatTensorOps<Flex>>::float_sum_dims(
+                grad,
+                &[0, 2, 3],
+            );
+        }
+        let [b, c, h, w] = dims4(&grad);
+        tensor(bias_grad(&values(&grad), Nchw { b, c, h, w }), [c])
+    }
+}
+
+/// The backward step of [`ConvKernels::kernel_conv2d`]: parents `[x, weight]` or
+/// `[x, weight, bias]`; state: the checkpointed `x` and `weight`, and the options.
+#[derive(Debug)]
+struct Conv2dBackward<const N: usize>;
+
+impl<B: ConvGradKernels, const N: usize> Backward<B, N> for Conv2dBackward<N> {
+    type State = (NodeId, NodeId, ConvOptions<2>);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, N>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let grad = grads.consume::<B>(&ops.node);
+        let (x_state, weight_state, options) = ops.state;
+        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
+        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
+        if let Some(node) = &ops.parents[0] {
+            let dx = B::kernel_conv2d_x_grad(&x, weight.clone(), grad.clone(), options.clone());
+            grads.register::<B>(node.id, dx);
+        }
+        if let Some(node) = &ops.parents[1] {
+            let dw = B::kernel_conv2d_weight_grad(x, &weight, grad.clone(), options);
+            grads.register::<B>(node.id, dw);
+        }
+        if let Some(Some(node)) = ops.parents.get(2) {
+            grads.register::<B>(node.id, B::kernel_conv2d_bias_grad(grad));
+        }
+    }
+}
+
+impl<B, C> ConvKernels for Autodiff<B, C>
+where
+    B: ConvKernels + ConvGradKernels,
+    C: CheckpointStrategy,
+{
+    fn kernel_conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        match Conv2dBackward::<2>
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (
+                    prep.checkpoint(&x),
+                    prep.checkpoint(&weight),
+                    options.clone(),
+                );
+                let out = B::kernel_conv2d(x.into_primitive(), weight.into_primitive(), options);
+                prep.finish(state, out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv2d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                options,
+            )),
+        }
+    }
+
+    fn kernel_conv2d_bias(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        match Conv2dBackward::<3>
+            .prepare::<C>([x.node(), weight.node(), bias.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (
+                    prep.checkpoint(&x),
+                    prep.checkpoint(&weight),
+                    options.clone(),
+                );
+                let out = B::kernel_conv2d_bias(
+                    x.into_primitive(),
+                    weight.into_primitive(),
+                    bias.into_primitive(),
+                    options,
+                );
+                prep.finish(state, out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv2d_bias(
+                x.into_primitive(),
+                weight.into_primitive(),
+                bias.into_primitive(),
+                options,
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::module::conv2d as burn_conv2d;
+    use burn::tensor::{Device, Distribution, Int};
+
+    use super::*;
+
+    fn random<const D: usize>(dims: [usize; D], device: &Device) -> Tensor<D> {
+        Tensor::random(dims, Distribution::Normal(0.0, 1.0), device)
+    }
+
+    fn close<const D: usize>(what: &str, ours: Tensor<D>, burn: Tensor<D>) {
+        assert_eq!(ours.dims(), burn.dims(), "{what}: shape");
+        let ours = ours.into_data().try_to_vec::<f32>().unwrap();
+        let burn = burn.into_data().try_to_vec::<f32>().unwrap();
+        let scale = burn.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        let worst = ours
+            .iter()
+            .zip(&burn)
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            worst <= 1e-4 * scale,
+            "{what}: max difference {worst} (scale {scale})"
+        );
+    }
+
+    /// Forward values and the gradients of `x`, the weight and the bias equal burn's
+    /// convolution under autodiff: Winograd and tap GEMMs (stride 1), the transposed path
+    /// (strides 2 and 3, padding beyond the kernel), dilation, asymmetric padding, 1×1, batch 2,
+    /// thin layers and no bias.
+    #[test]
+    fn gradients_match_burn_convolution() {
+        // (x dims, [co, kh, kw], stride, dilation, [top, left, bottom, right], bias)
+        type Case = ([usize; 4], [usize; 3], usize, usize, [usize; 4], bool);
+        let cases: [Case; 9] = [
+            ([1, 24, 9, 11], [32, 3, 3], 1, 1, [1, 1, 1, 1], true),
+            ([2, 20, 8, 7], [16, 3, 3], 1, 1, [0, 1, 2, 1], false),
+            ([1, 18, 6, 9], [20, 1, 1], 1, 1, [0, 0, 0, 0], true),
+            ([1, 16, 12, 10], [8, 7, 7], 1, 1, [3, 3, 3, 3], true),
+            ([1, 17, 10, 10], [16, 3, 3], 1, 2, [2, 2, 2, 2], true),
+            ([1, 3, 17, 22], [32, 3, 3], 2, 1, [1, 1, 1, 1], false),
+            ([2, 24, 16, 20], [48, 3, 3], 2, 2, [2, 2, 2, 2], true),
+            ([1, 16, 15, 9], [6, 4, 4], 3, 1, [0, 2, 1, 0], true),
+            ([1, 16, 7, 8], [4, 1, 5], 1, 1, [0, 3, 0, 2], true),
+        ];
+        let device = Device::flex().autodiff();
+        for (dims, [co, kh, kw], stride, dilation, padding, with_bias) in cases {
+            let x = random(dims, &device);
+            let weight = random([co, dims[1], kh, kw], &device);
+            let bias = with_bias.then(|| random([co], &device));
+            let geometry = Geometry {
+                kernel: [kh, kw],
+                stride: [stride; 2],
+                padding,
+                dilation: [dilation; 2],
+            };
+            let [top, left, bottom, right] = padding;
+            let options = ConvOptions::new_with_padding(
+                [stride; 2],
+                [(top, bottom), (left, right)],
+                [dilation; 2],
+                1,
+            );
+            let run = |ours: bool| {
+                let x = x.clone().require_grad();
+                let weight = weight.clone().require_grad();
+                let bias = bias.clone().map(Tensor::require_grad);
+                let y = if ours {
+                    conv2d(x.clone(), weight.clone(), bias.clone(), geometry)
+                } else {
+                    burn_conv2d(x.clone(), weight.clone(), bias.clone(), options.clone())
+                };
+                // A fixed, varied upstream gradient (the same for both runs).
+                let count = y.dims().iter().product::<usize>() as i64;
+                let upstream = Tensor::<1, Int>::arange(0..count, &device)
+                    .float()
+                    .mul_scalar(0.37)
+                    .sin()
+                    .reshape(y.dims());
+                let grads = (y.clone() * upstream).sum().backward();
+                (
+                    y.inner(),
+                    x.grad(&grads).expect("x gradient"),
+                    weight.grad(&grads).expect("weight gradient"),
+                    bias.map(|b| b.grad(&grads).expect("bias gradient")),
+                )
+            };
+            let (ours, theirs) = (run(true), run(false));
+            let what = format!("{dims:?} k{kh}×{kw} s{stride} d{dilation} p{padding:?}");
+            close(&format!("{what} output"), ours.0, theirs.0);
+            close(&format!("{what} ∂x"), ours.1, theirs.1);
+            close(&format!("{what} ∂w"), ours.2, theirs.2);
+            if let (Some(a), Some(b)) = (ours.3, theirs.3) {
+                close(&format!("{what} ∂b"), a, b);
+            }
+        }
+    }
+}
