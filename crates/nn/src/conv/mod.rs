@@ -218,6 +218,11 @@ pub fn on_cpu_inference<const D: usize>(x: &Tensor<D>) -> bool {
     cpu_mode(x) == Some(CpuMode::Inference)
 }
 
+/// The CPU device with autodiff: where the kernels run as burn operations with their backward.
+pub fn on_cpu_training<const D: usize>(x: &Tensor<D>) -> bool {
+    cpu_mode(x) == Some(CpuMode::Training)
+}
+
 /// Per-channel `(scale, shift)` of `bn(y + bias)`: `scale = γ/√(σ²+ε)`,
 /// `shift = β + (bias − μ)·scale`; without `bn`, just the bias.
 fn affine(bias: Option<Vec<f32>>, bn: Option<&BatchNorm>) -> (Option<Vec<f32>>, Option<Vec<f32>>) {

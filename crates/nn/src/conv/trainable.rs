@@ -17,11 +17,12 @@ use burn::backend::flex::FlexTensor;
 use burn::backend::ops::{ConvOptions, ModuleOps};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
-use burn::tensor::{DType, Tensor, TensorData};
+use burn::tensor::Tensor;
 
 use super::gradients::{bias_grad, conv2d_input_grad, conv2d_weight_grad};
 use super::kernels::{conv2d_nchw, Epilogue, Geometry, Nchw};
 use super::prepared::LayerWeights;
+use crate::flex_tensor::{all_f32, dims, tensor, values};
 
 /// `conv2d(x, weight, bias)` (one group, explicit padding) on the kernels, differentiable where
 /// `x` tracks gradients. Only for the CPU device (`Flex`, with or without autodiff).
@@ -94,32 +95,6 @@ fn geometry_of(options: &ConvOptions<2>, weight: &FlexTensor) -> Geometry {
     }
 }
 
-fn dims4(t: &FlexTensor) -> [usize; 4] {
-    let s = t.layout().shape();
-    [s[0], s[1], s[2], s[3]]
-}
-
-/// The tensor's values in row-major order, copied only where its layout is not contiguous.
-fn values(t: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
-    match t.as_slice::<f32>() {
-        Some(v) => std::borrow::Cow::Borrowed(v),
-        None => std::borrow::Cow::Owned(
-            t.to_contiguous()
-                .as_slice::<f32>()
-                .expect("a contiguous f32 tensor")
-                .to_vec(),
-        ),
-    }
-}
-
-fn tensor(values: Vec<f32>, shape: impl Into<burn::tensor::Shape>) -> FlexTensor {
-    FlexTensor::from_data(TensorData::new(values, shape))
-}
-
-fn all_f32<'a>(tensors: impl IntoIterator<Item = &'a FlexTensor>) -> bool {
-    tensors.into_iter().all(|t| t.dtype() == DType::F32)
-}
-
 impl ConvKernels for Flex {
     fn kernel_conv2d(x: FlexTensor, weight: FlexTensor, options: ConvOptions<2>) -> FlexTensor {
         flex_conv2d(x, weight, None, options)
@@ -145,8 +120,8 @@ fn flex_conv2d(
     if !all_f32([&x, &weight].into_iter().chain(&bias)) {
         return <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
     }
-    let [b, c, h, w] = dims4(&x);
-    let [co, _, kh, kw] = dims4(&weight);
+    let [b, c, h, w] = dims::<4>(&x);
+    let [co, _, kh, kw] = dims::<4>(&weight);
     let geometry = geometry_of(&options, &weight);
     let weights = LayerWeights::new(values(&weight).into_owned(), co, kh * kw);
     let bias = bias.as_ref().map(values);
@@ -170,8 +145,8 @@ impl ConvGradKernels for Flex {
         if !all_f32([x, &weight, &grad]) {
             return <Flex as ModuleOps<Flex>>::conv2d_x_backward(x.clone(), weight, grad, options);
         }
-        let [b, ci, h, w] = dims4(x);
-        let [_, co, oh, ow] = dims4(&grad);
+        let [b, ci, h, w] = dims::<4>(x);
+        let [_, co, oh, ow] = dims::<4>(&grad);
         let geometry = geometry_of(&options, &weight);
         let shape = Nchw {
             b,
@@ -204,8 +179,8 @@ impl ConvGradKernels for Flex {
                 options,
             );
         }
-        let [b, c, h, w] = dims4(&x);
-        let dims = dims4(weight);
+        let [b, c, h, w] = dims::<4>(&x);
+        let dims = dims::<4>(weight);
         let geometry = geometry_of(&options, weight);
         let out = conv2d_weight_grad(
             &values(&x),
@@ -224,7 +199,7 @@ impl ConvGradKernels for Flex {
                 &[0, 2, 3],
             );
         }
-        let [b, c, h, w] = dims4(&grad);
+        let [b, c, h, w] = dims::<4>(&grad);
         tensor(bias_grad(&values(&grad), Nchw { b, c, h, w }), [c])
     }
 }

@@ -13,7 +13,8 @@
 use burn::tensor::{Int, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference};
+use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::interp::{linear_tap, linear_taps};
 use crate::matmul::SharedOut;
 
 /// Profile group of the volume's construction and its lookups.
@@ -109,6 +110,8 @@ impl GeoEncodingVolume {
             return self.lookup_plain(disp);
         }
         let device = disp.device();
+        // Training on the CPU: the interpolation kernel (one pass, no gathers or scatters).
+        let kernels = on_cpu_training(disp) && disp.dtype() == burn::tensor::DType::F32;
         let taps = 2 * self.radius + 1;
         let n = b * h * w;
         let disp = disp.clone().reshape([n, 1]);
@@ -128,11 +131,17 @@ impl GeoEncodingVolume {
             let pos_corr =
                 xs.clone().div_scalar(scale) - disp.clone().div_scalar(scale) + dx.clone();
             let [_, g, d] = geo.dims();
-            let idx = linear_taps(pos_geo, d);
+            let l2 = corr.dims()[1];
+            if kernels {
+                out.push(linear_taps(geo.clone(), pos_geo).reshape([n, g * taps]));
+                let corr = corr.clone().reshape([n, 1, l2]);
+                out.push(linear_taps(corr, pos_corr).reshape([n, taps]));
+                continue;
+            }
+            let idx = tap_indices(pos_geo, d);
             let sampled_geo = sample_3d(geo.clone(), &idx, g); // [n, g, taps]
             out.push(sampled_geo.reshape([n, g * taps]));
-            let l2 = corr.dims()[1];
-            let idx = linear_taps(pos_corr, l2);
+            let idx = tap_indices(pos_corr, l2);
             out.push(sample_2d(corr.clone(), &idx));
         }
         let c = out.iter().map(|t| t.dims()[1]).sum::<usize>();
@@ -201,23 +210,6 @@ impl GeoEncodingVolume {
     }
 }
 
-/// [`linear_taps`] for one position: `(i0, w0, i1, w1)`.
-fn linear_tap(pos: f32, len: usize) -> (usize, f32, usize, f32) {
-    let f0 = pos.floor();
-    let frac = pos - f0;
-    let f1 = f0 + 1.0;
-    let max = len as f32 - 1.0;
-    let inside = |f: f32| if (0.0..=max).contains(&f) { 1.0 } else { 0.0 };
-    let w0 = (-frac + 1.0) * inside(f0);
-    let w1 = frac * inside(f1);
-    (
-        f0.clamp(0.0, max) as usize,
-        w0,
-        f1.clamp(0.0, max) as usize,
-        w1,
-    )
-}
-
 /// Indices and weights of 1-D linear interpolation with zeros outside `[0, len-1]`:
 /// `(i0, w0, i1, w1)`, indices clamped into range, weights zeroed for taps outside.
 struct Taps {
@@ -227,7 +219,7 @@ struct Taps {
     w1: Tensor<2>,
 }
 
-fn linear_taps(pos: Tensor<2>, len: usize) -> Taps {
+fn tap_indices(pos: Tensor<2>, len: usize) -> Taps {
     let f0 = pos.clone().floor();
     let frac = pos - f0.clone();
     let f1 = f0.clone().add_scalar(1.0);

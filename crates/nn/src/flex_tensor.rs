@@ -1,0 +1,41 @@
+//! Plain values in and out of burn's CPU tensor (`FlexTensor`), for the kernels that run as burn
+//! backend extensions ([`crate::conv`], [`crate::interp`]).
+
+use std::borrow::Cow;
+
+use burn::backend::flex::FlexTensor;
+use burn::tensor::{DType, Shape, TensorData};
+
+/// The dimensions of a tensor known to have `D` of them.
+pub(crate) fn dims<const D: usize>(t: &FlexTensor) -> [usize; D] {
+    let shape = t.layout().shape();
+    assert_eq!(
+        shape.num_dims(),
+        D,
+        "expected a {D}-d tensor, got {shape:?}"
+    );
+    std::array::from_fn(|i| shape[i])
+}
+
+/// The tensor's `f32` values in row-major order, copied only where its layout is not contiguous.
+pub(crate) fn values(t: &FlexTensor) -> Cow<'_, [f32]> {
+    match t.as_slice::<f32>() {
+        Some(v) => Cow::Borrowed(v),
+        None => Cow::Owned(
+            t.to_contiguous()
+                .as_slice::<f32>()
+                .expect("an f32 tensor (callers check the dtype)")
+                .to_vec(),
+        ),
+    }
+}
+
+/// A tensor of `values` in row-major order.
+pub(crate) fn tensor(values: Vec<f32>, shape: impl Into<Shape>) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
+
+/// Whether every tensor holds `f32` (the only dtype the kernels have).
+pub(crate) fn all_f32<'a>(tensors: impl IntoIterator<Item = &'a FlexTensor>) -> bool {
+    tensors.into_iter().all(|t| t.dtype() == DType::F32)
+}
