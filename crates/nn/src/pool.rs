@@ -1,31 +1,175 @@
-//! Average pooling of feature maps on plain buffers, for the CPU inference device.
+//! Average pooling of feature maps on plain buffers, for the CPU device: directly in inference,
+//! as a burn backend operation with its backward in training.
 //!
 //! Why: burn's CPU backend pools a 2-D map through its 3-D pooling kernel and a strided index
-//! iterator; the ConvGRU pools two hidden states at every iteration, which took 2 % of a
-//! MonSter++ pass (BENCHMARKS.md).
+//! iterator, forward and backward; the ConvGRU pools two hidden states at every iteration, which
+//! took 2 % of a MonSter++ pass and 6 % of a training step (BENCHMARKS.md).
 
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
 use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::{DType, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference};
+use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::flex_tensor::{dims, tensor, values};
 
 /// PyTorch's `avg_pool2d(x, k, stride, padding, count_include_pad=True)` with a square window:
-/// the plain kernel on the CPU inference device, burn's elsewhere.
+/// the plain kernel on the CPU device (with or without autodiff), burn's elsewhere.
 pub fn avg_pool2d_padded(x: Tensor<4>, k: usize, stride: usize, padding: usize) -> Tensor<4> {
-    if !on_cpu_inference(&x) {
-        return avg_pool2d(
-            x,
-            AvgPoolOptions::new([k, k])
-                .with_stride([stride, stride])
-                .with_padding([padding, padding])
-                .with_count_include_pad(true),
-        );
+    if on_cpu_inference(&x) {
+        let (device, [b, c, h, w]) = (x.device(), x.dims());
+        let (out, [oh, ow]) = avg_pool_planes(&f32_vec(x), [h, w], k, stride, padding);
+        return Tensor::from_data(TensorData::new(out, [b, c, oh, ow]), &device);
     }
-    let (device, [b, c, h, w]) = (x.device(), x.dims());
-    let (out, [oh, ow]) = avg_pool_planes(&f32_vec(x), [h, w], k, stride, padding);
-    Tensor::from_data(TensorData::new(out, [b, c, oh, ow]), &device)
+    if on_cpu_training(&x) && x.dtype() == DType::F32 {
+        let window = Window { k, stride, padding };
+        return Tensor::from_dispatch(<Dispatch as PoolKernels>::kernel_avg_pool2d(
+            x.into_dispatch(),
+            window.into(),
+        ));
+    }
+    avg_pool2d(
+        x,
+        AvgPoolOptions::new([k, k])
+            .with_stride([stride, stride])
+            .with_padding([padding, padding])
+            .with_count_include_pad(true),
+    )
+}
+
+/// A square pooling window: size, stride and zero padding (counted in the average).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Window {
+    k: usize,
+    stride: usize,
+    padding: usize,
+}
+
+impl From<Window> for [usize; 3] {
+    fn from(w: Window) -> Self {
+        [w.k, w.stride, w.padding]
+    }
+}
+
+impl From<[usize; 3]> for Window {
+    fn from([k, stride, padding]: [usize; 3]) -> Self {
+        Window { k, stride, padding }
+    }
+}
+
+impl Window {
+    /// Output size along an axis of `n`.
+    fn output(self, n: usize) -> usize {
+        (n + 2 * self.padding - self.k) / self.stride + 1
+    }
+
+    /// The in-bounds input indices of output `o`'s window along an axis of `n`.
+    fn span(self, o: usize, n: usize) -> std::ops::Range<usize> {
+        let start = (o * self.stride) as isize - self.padding as isize;
+        let lo = start.max(0) as usize;
+        let hi = ((start + self.k as isize) as usize).min(n);
+        lo..hi
+    }
+}
+
+#[backend_extension(Flex, Autodiff)]
+pub trait PoolKernels: Backend {
+    /// [`avg_pool2d_padded`] with `window` = `[k, stride, padding]`.
+    fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 3]) -> FloatTensor<Self>;
+}
+
+/// The gradient of [`PoolKernels::kernel_avg_pool2d`].
+pub trait PoolGradKernels: Backend {
+    fn kernel_avg_pool2d_grad(
+        grad: FloatTensor<Self>,
+        input: [usize; 2],
+        window: [usize; 3],
+    ) -> FloatTensor<Self>;
+}
+
+impl PoolKernels for Flex {
+    fn kernel_avg_pool2d(x: FlexTensor, window: [usize; 3]) -> FlexTensor {
+        let [b, c, h, w] = dims(&x);
+        let [k, stride, padding] = window;
+        let (out, [oh, ow]) = avg_pool_planes(&values(&x), [h, w], k, stride, padding);
+        tensor(out, [b, c, oh, ow])
+    }
+}
+
+impl PoolGradKernels for Flex {
+    fn kernel_avg_pool2d_grad(
+        grad: FlexTensor,
+        [h, w]: [usize; 2],
+        window: [usize; 3],
+    ) -> FlexTensor {
+        let [b, c, oh, ow] = dims(&grad);
+        let window = Window::from(window);
+        let share = 1.0 / (window.k * window.k) as f32;
+        let grad = values(&grad);
+        let mut out = vec![0.0f32; b * c * h * w];
+        out.par_chunks_exact_mut(h * w)
+            .zip(grad.par_chunks_exact(oh * ow))
+            .for_each(|(dst, src)| {
+                for (oy, row) in src.chunks_exact(ow).enumerate() {
+                    for y in window.span(oy, h) {
+                        let dst = &mut dst[y * w..(y + 1) * w];
+                        for (ox, &g) in row.iter().enumerate() {
+                            for d in &mut dst[window.span(ox, w)] {
+                                *d += g * share;
+                            }
+                        }
+                    }
+                }
+            });
+        tensor(out, [b, c, h, w])
+    }
+}
+
+/// The backward step of [`PoolKernels::kernel_avg_pool2d`]; state: the input's size, the window.
+#[derive(Debug)]
+struct AvgPoolBackward;
+
+impl<B: PoolGradKernels> Backward<B, 1> for AvgPoolBackward {
+    type State = ([usize; 2], [usize; 3]);
+
+    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let grad = grads.consume::<B>(&ops.node);
+        let (input, window) = ops.state;
+        if let Some(node) = &ops.parents[0] {
+            grads.register::<B>(node.id, B::kernel_avg_pool2d_grad(grad, input, window));
+        }
+    }
+}
+
+impl<B, C> PoolKernels for Autodiff<B, C>
+where
+    B: PoolKernels + PoolGradKernels,
+    C: CheckpointStrategy,
+{
+    fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 3]) -> FloatTensor<Self> {
+        let shape = x.primitive().shape();
+        let input = [shape[2], shape[3]];
+        match AvgPoolBackward
+            .prepare::<C>([x.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => prep.finish(
+                (input, window),
+                B::kernel_avg_pool2d(x.into_primitive(), window),
+            ),
+            OpsKind::UnTracked(prep) => {
+                prep.finish(B::kernel_avg_pool2d(x.into_primitive(), window))
+            }
+        }
+    }
 }
 
 /// [`avg_pool2d_padded`] of every `h × w` plane of `planes`: the window's sum (rows, then
@@ -42,26 +186,17 @@ pub fn avg_pool_planes(
         h + 2 * padding >= k && w + 2 * padding >= k,
         "avg_pool: window larger than the padded input"
     );
-    let (oh, ow) = (
-        (h + 2 * padding - k) / stride + 1,
-        (w + 2 * padding - k) / stride + 1,
-    );
+    let window = Window { k, stride, padding };
+    let (oh, ow) = (window.output(h), window.output(w));
     let divisor = (k * k) as f32;
-    // The window's first index along an axis and the in-bounds part of it.
-    let span = |o: usize, n: usize| {
-        let start = (o * stride) as isize - padding as isize;
-        let lo = start.max(0) as usize;
-        let hi = ((start + k as isize) as usize).min(n);
-        lo..hi
-    };
     let mut out = vec![0.0f32; planes.len() / (h * w) * oh * ow];
     out.par_chunks_exact_mut(oh * ow)
         .zip(planes.par_chunks_exact(h * w))
         .for_each(|(dst, src)| {
             for (oy, row) in dst.chunks_exact_mut(ow).enumerate() {
-                let rows = span(oy, h);
+                let rows = window.span(oy, h);
                 for (ox, v) in row.iter_mut().enumerate() {
-                    let cols = span(ox, w);
+                    let cols = window.span(ox, w);
                     let mut sum = 0.0f32;
                     for y in rows.clone() {
                         for &s in &src[y * w + cols.start..y * w + cols.end] {
@@ -78,31 +213,65 @@ pub fn avg_pool_planes(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use burn::tensor::{Device, Distribution};
+    use burn::tensor::{Device, Distribution, Int};
 
     /// The plain kernel against burn's on the ConvGRU's pooling (3×3, stride 2, padding 1) of
     /// even and odd sizes, and a 2×2 window without padding.
+    ///
+    /// Under autodiff the operation's values and its input gradient match burn's too.
     #[test]
     fn matches_burn() {
-        let device = Device::flex();
-        for (dims, k, stride, padding) in [
-            ([1, 3, 16, 32], 3, 2, 1),
-            ([2, 4, 7, 9], 3, 2, 1),
-            ([1, 2, 1, 1], 3, 2, 1),
-            ([1, 2, 6, 5], 2, 2, 0),
-        ] {
-            let x = Tensor::<4>::random(dims, Distribution::Normal(0.0, 1.0), &device);
-            let ours = avg_pool2d_padded(x.clone(), k, stride, padding);
-            let theirs = avg_pool2d(
-                x,
-                AvgPoolOptions::new([k, k])
-                    .with_stride([stride, stride])
-                    .with_padding([padding, padding])
-                    .with_count_include_pad(true),
-            );
-            assert_eq!(ours.dims(), theirs.dims());
-            let d: f32 = (ours - theirs).abs().max().into_scalar();
-            assert!(d < 1e-6, "{dims:?} k{k} s{stride} p{padding}: {d}");
+        let max_difference = |a: Tensor<4>, b: Tensor<4>| -> f32 {
+            assert_eq!(a.dims(), b.dims());
+            (a - b).abs().max().into_scalar()
+        };
+        for device in [Device::flex(), Device::flex().autodiff()] {
+            for (dims, k, stride, padding) in [
+                ([1, 3, 16, 32], 3, 2, 1),
+                ([2, 4, 7, 9], 3, 2, 1),
+                ([1, 2, 1, 1], 3, 2, 1),
+                ([1, 2, 6, 5], 2, 2, 0),
+            ] {
+                let x = Tensor::<4>::random(dims, Distribution::Normal(0.0, 1.0), &device);
+                let run = |ours: bool| {
+                    let tracked = device.is_autodiff();
+                    let x = if tracked {
+                        x.clone().require_grad()
+                    } else {
+                        x.clone()
+                    };
+                    let y = if ours {
+                        avg_pool2d_padded(x.clone(), k, stride, padding)
+                    } else {
+                        avg_pool2d(
+                            x.clone(),
+                            AvgPoolOptions::new([k, k])
+                                .with_stride([stride, stride])
+                                .with_padding([padding, padding])
+                                .with_count_include_pad(true),
+                        )
+                    };
+                    let grad = tracked.then(|| {
+                        // The same upstream gradient for both: a function of the position.
+                        let count = y.dims().iter().product::<usize>() as i64;
+                        let r = Tensor::<1, Int>::arange(0..count, &device)
+                            .float()
+                            .sin()
+                            .reshape(y.dims());
+                        let grads = (y.clone() * r).sum().backward();
+                        x.grad(&grads).expect("input gradient")
+                    });
+                    (y.detach(), grad)
+                };
+                let (ours, theirs) = (run(true), run(false));
+                let what = format!("{device:?} {dims:?} k{k} s{stride} p{padding}");
+                let d = max_difference(ours.0, theirs.0);
+                assert!(d < 1e-6, "{what}: {d}");
+                if let (Some(a), Some(b)) = (ours.1, theirs.1) {
+                    let d = max_difference(a, b);
+                    assert!(d < 1e-6, "{what} gradient: {d}");
+                }
+            }
         }
     }
 }
