@@ -20,53 +20,59 @@ use rayon::prelude::*;
 use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
 use crate::flex_tensor::{dims, tensor, values};
 
-/// PyTorch's `avg_pool2d(x, k, stride, padding, count_include_pad=True)` with a square window:
-/// the plain kernel on the CPU device (with or without autodiff), burn's elsewhere.
+/// PyTorch's `avg_pool2d(x, k, stride, padding, count_include_pad=True)` with a square window.
 pub fn avg_pool2d_padded(x: Tensor<4>, k: usize, stride: usize, padding: usize) -> Tensor<4> {
+    avg_pool2d_box(x, [k, k], [stride, stride], [padding, padding])
+}
+
+/// PyTorch's `avg_pool2d(x, kernel, stride, padding, count_include_pad=True)`: the plain kernel
+/// on the CPU device (with or without autodiff), burn's elsewhere.
+pub fn avg_pool2d_box(
+    x: Tensor<4>,
+    kernel: [usize; 2],
+    stride: [usize; 2],
+    padding: [usize; 2],
+) -> Tensor<4> {
+    let window = [0, 1].map(|a| Axis {
+        k: kernel[a],
+        stride: stride[a],
+        padding: padding[a],
+    });
     if on_cpu_inference(&x) {
         let (device, [b, c, h, w]) = (x.device(), x.dims());
-        let (out, [oh, ow]) = avg_pool_planes(&f32_vec(x), [h, w], k, stride, padding);
+        let (out, [oh, ow]) = avg_pool_planes(&f32_vec(x), [h, w], window);
         return Tensor::from_data(TensorData::new(out, [b, c, oh, ow]), &device);
     }
     if on_cpu_training(&x) && x.dtype() == DType::F32 {
-        let window = Window { k, stride, padding };
         return Tensor::from_dispatch(<Dispatch as PoolKernels>::kernel_avg_pool2d(
             x.into_dispatch(),
-            window.into(),
+            encode(window),
         ));
     }
     avg_pool2d(
         x,
-        AvgPoolOptions::new([k, k])
-            .with_stride([stride, stride])
-            .with_padding([padding, padding])
+        AvgPoolOptions::new(kernel)
+            .with_stride(stride)
+            .with_padding(padding)
             .with_count_include_pad(true),
     )
 }
 
-/// A square pooling window: size, stride and zero padding (counted in the average).
+/// A pooling window along one axis: size, stride and zero padding (counted in the average).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Window {
-    k: usize,
-    stride: usize,
-    padding: usize,
+pub struct Axis {
+    pub k: usize,
+    pub stride: usize,
+    pub padding: usize,
 }
 
-impl From<Window> for [usize; 3] {
-    fn from(w: Window) -> Self {
-        [w.k, w.stride, w.padding]
-    }
-}
-
-impl From<[usize; 3]> for Window {
-    fn from([k, stride, padding]: [usize; 3]) -> Self {
-        Window { k, stride, padding }
-    }
-}
-
-impl Window {
+impl Axis {
     /// Output size along an axis of `n`.
     fn output(self, n: usize) -> usize {
+        assert!(
+            n + 2 * self.padding >= self.k,
+            "avg_pool: window larger than the padded input"
+        );
         (n + 2 * self.padding - self.k) / self.stride + 1
     }
 
@@ -79,10 +85,30 @@ impl Window {
     }
 }
 
+/// The window as the extension operation carries it: `[kh, sh, ph, kw, sw, pw]`.
+fn encode([y, x]: [Axis; 2]) -> [usize; 6] {
+    [y.k, y.stride, y.padding, x.k, x.stride, x.padding]
+}
+
+fn decode([kh, sh, ph, kw, sw, pw]: [usize; 6]) -> [Axis; 2] {
+    [
+        Axis {
+            k: kh,
+            stride: sh,
+            padding: ph,
+        },
+        Axis {
+            k: kw,
+            stride: sw,
+            padding: pw,
+        },
+    ]
+}
+
 #[backend_extension(Flex, Autodiff)]
 pub trait PoolKernels: Backend {
-    /// [`avg_pool2d_padded`] with `window` = `[k, stride, padding]`.
-    fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 3]) -> FloatTensor<Self>;
+    /// [`avg_pool2d_box`] with `window` = `[kh, sh, ph, kw, sw, pw]`.
+    fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 6]) -> FloatTensor<Self>;
 }
 
 /// The gradient of [`PoolKernels::kernel_avg_pool2d`].
@@ -90,15 +116,14 @@ pub trait PoolGradKernels: Backend {
     fn kernel_avg_pool2d_grad(
         grad: FloatTensor<Self>,
         input: [usize; 2],
-        window: [usize; 3],
+        window: [usize; 6],
     ) -> FloatTensor<Self>;
 }
 
 impl PoolKernels for Flex {
-    fn kernel_avg_pool2d(x: FlexTensor, window: [usize; 3]) -> FlexTensor {
+    fn kernel_avg_pool2d(x: FlexTensor, window: [usize; 6]) -> FlexTensor {
         let [b, c, h, w] = dims(&x);
-        let [k, stride, padding] = window;
-        let (out, [oh, ow]) = avg_pool_planes(&values(&x), [h, w], k, stride, padding);
+        let (out, [oh, ow]) = avg_pool_planes(&values(&x), [h, w], decode(window));
         tensor(out, [b, c, oh, ow])
     }
 }
@@ -107,21 +132,21 @@ impl PoolGradKernels for Flex {
     fn kernel_avg_pool2d_grad(
         grad: FlexTensor,
         [h, w]: [usize; 2],
-        window: [usize; 3],
+        window: [usize; 6],
     ) -> FlexTensor {
         let [b, c, oh, ow] = dims(&grad);
-        let window = Window::from(window);
-        let share = 1.0 / (window.k * window.k) as f32;
+        let [ay, ax] = decode(window);
+        let share = 1.0 / (ay.k * ax.k) as f32;
         let grad = values(&grad);
         let mut out = vec![0.0f32; b * c * h * w];
         out.par_chunks_exact_mut(h * w)
             .zip(grad.par_chunks_exact(oh * ow))
             .for_each(|(dst, src)| {
                 for (oy, row) in src.chunks_exact(ow).enumerate() {
-                    for y in window.span(oy, h) {
+                    for y in ay.span(oy, h) {
                         let dst = &mut dst[y * w..(y + 1) * w];
                         for (ox, &g) in row.iter().enumerate() {
-                            for d in &mut dst[window.span(ox, w)] {
+                            for d in &mut dst[ax.span(ox, w)] {
                                 *d += g * share;
                             }
                         }
@@ -137,7 +162,7 @@ impl PoolGradKernels for Flex {
 struct AvgPoolBackward;
 
 impl<B: PoolGradKernels> Backward<B, 1> for AvgPoolBackward {
-    type State = ([usize; 2], [usize; 3]);
+    type State = ([usize; 2], [usize; 6]);
 
     fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
         let grad = grads.consume::<B>(&ops.node);
@@ -153,7 +178,7 @@ where
     B: PoolKernels + PoolGradKernels,
     C: CheckpointStrategy,
 {
-    fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 3]) -> FloatTensor<Self> {
+    fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 6]) -> FloatTensor<Self> {
         let shape = x.primitive().shape();
         let input = [shape[2], shape[3]];
         match AvgPoolBackward
@@ -172,31 +197,24 @@ where
     }
 }
 
-/// [`avg_pool2d_padded`] of every `h × w` plane of `planes`: the window's sum (rows, then
-/// columns, as PyTorch adds them) divided by `k²`, padding counted. Returns the output and its
-/// size `[oh, ow]`, `(n + 2·padding − k) / stride + 1` per axis.
+/// [`avg_pool2d_box`] of every `h × w` plane of `planes`: the window's sum (rows, then
+/// columns, as PyTorch adds them) divided by `kh·kw`, padding counted. Returns the output and
+/// its size `[oh, ow]`, `(n + 2·padding − k) / stride + 1` per axis.
 pub fn avg_pool_planes(
     planes: &[f32],
     [h, w]: [usize; 2],
-    k: usize,
-    stride: usize,
-    padding: usize,
+    [ay, ax]: [Axis; 2],
 ) -> (Vec<f32>, [usize; 2]) {
-    assert!(
-        h + 2 * padding >= k && w + 2 * padding >= k,
-        "avg_pool: window larger than the padded input"
-    );
-    let window = Window { k, stride, padding };
-    let (oh, ow) = (window.output(h), window.output(w));
-    let divisor = (k * k) as f32;
+    let (oh, ow) = (ay.output(h), ax.output(w));
+    let divisor = (ay.k * ax.k) as f32;
     let mut out = vec![0.0f32; planes.len() / (h * w) * oh * ow];
     out.par_chunks_exact_mut(oh * ow)
         .zip(planes.par_chunks_exact(h * w))
         .for_each(|(dst, src)| {
             for (oy, row) in dst.chunks_exact_mut(ow).enumerate() {
-                let rows = window.span(oy, h);
+                let rows = ay.span(oy, h);
                 for (ox, v) in row.iter_mut().enumerate() {
-                    let cols = window.span(ox, w);
+                    let cols = ax.span(ox, w);
                     let mut sum = 0.0f32;
                     for y in rows.clone() {
                         for &s in &src[y * w + cols.start..y * w + cols.end] {
@@ -216,7 +234,7 @@ mod tests {
     use burn::tensor::{Device, Distribution, Int};
 
     /// The plain kernel against burn's on the ConvGRU's pooling (3×3, stride 2, padding 1) of
-    /// even and odd sizes, and a 2×2 window without padding.
+    /// even and odd sizes, a 2×2 window without padding and the SSIM's 1-D box windows.
     ///
     /// Under autodiff the operation's values and its input gradient match burn's too.
     #[test]
@@ -227,10 +245,12 @@ mod tests {
         };
         for device in [Device::flex(), Device::flex().autodiff()] {
             for (dims, k, stride, padding) in [
-                ([1, 3, 16, 32], 3, 2, 1),
-                ([2, 4, 7, 9], 3, 2, 1),
-                ([1, 2, 1, 1], 3, 2, 1),
-                ([1, 2, 6, 5], 2, 2, 0),
+                ([1, 3, 16, 32], [3, 3], [2, 2], [1, 1]),
+                ([2, 4, 7, 9], [3, 3], [2, 2], [1, 1]),
+                ([1, 2, 1, 1], [3, 3], [2, 2], [1, 1]),
+                ([1, 2, 6, 5], [2, 2], [2, 2], [0, 0]),
+                ([1, 3, 12, 13], [1, 11], [1, 1], [0, 5]),
+                ([1, 3, 12, 13], [11, 1], [1, 1], [5, 0]),
             ] {
                 let x = Tensor::<4>::random(dims, Distribution::Normal(0.0, 1.0), &device);
                 let run = |ours: bool| {
@@ -241,13 +261,13 @@ mod tests {
                         x.clone()
                     };
                     let y = if ours {
-                        avg_pool2d_padded(x.clone(), k, stride, padding)
+                        avg_pool2d_box(x.clone(), k, stride, padding)
                     } else {
                         avg_pool2d(
                             x.clone(),
-                            AvgPoolOptions::new([k, k])
-                                .with_stride([stride, stride])
-                                .with_padding([padding, padding])
+                            AvgPoolOptions::new(k)
+                                .with_stride(stride)
+                                .with_padding(padding)
                                 .with_count_include_pad(true),
                         )
                     };
@@ -264,7 +284,7 @@ mod tests {
                     (y.detach(), grad)
                 };
                 let (ours, theirs) = (run(true), run(false));
-                let what = format!("{device:?} {dims:?} k{k} s{stride} p{padding}");
+                let what = format!("{device:?} {dims:?} k{k:?} s{stride:?} p{padding:?}");
                 let d = max_difference(ours.0, theirs.0);
                 assert!(d < 1e-6, "{what}: {d}");
                 if let (Some(a), Some(b)) = (ours.1, theirs.1) {

@@ -5,11 +5,9 @@
 //! 255 before every image term), disparities `[B, 1, H, W]` in pixels with `x_R = x_L − d`, masks
 //! `[B, 1, H, W]` booleans (true = counted).
 
-use burn::tensor::module::avg_pool2d;
-use burn::tensor::ops::{
-    AvgPoolOptions, GridSampleOptions, GridSamplePaddingMode, InterpolateMode,
-};
+use burn::tensor::ops::{GridSampleOptions, GridSamplePaddingMode, InterpolateMode};
 use burn::tensor::{Bool, Tensor};
+use nn::pool::avg_pool2d_box;
 
 use super::config::DisparityPenalty;
 
@@ -66,20 +64,8 @@ pub fn ssim_loss_map(x: Tensor<4>, y: Tensor<4>, window: usize) -> Tensor<4> {
     // pools give exactly the 2-D one at 2k instead of k² taps per pixel, forward and backward.
     let r = window / 2;
     let pool = |t: Tensor<4>| {
-        let rows = avg_pool2d(
-            t,
-            AvgPoolOptions::new([1, window])
-                .with_stride([1, 1])
-                .with_padding([0, r])
-                .with_count_include_pad(true),
-        );
-        avg_pool2d(
-            rows,
-            AvgPoolOptions::new([window, 1])
-                .with_stride([1, 1])
-                .with_padding([r, 0])
-                .with_count_include_pad(true),
-        )
+        let rows = avg_pool2d_box(t, [1, window], [1, 1], [0, r]);
+        avg_pool2d_box(rows, [window, 1], [1, 1], [r, 0])
     };
     let mu_x = pool(x.clone());
     let mu_y = pool(y.clone());
