@@ -381,16 +381,20 @@ fn train_step(
     let loss_batch = LossBatch::new(&items, &cfg.loss, &session.device)
         .map_err(|e| TrainError::Loss(e.to_string()))?;
     let (left, right) = network_inputs(batch, &session.device);
-    let out = model.forward(left, right, cfg.run.train_iters, false);
-    let init = out.init_disp_up.ok_or_else(|| {
-        TrainError::Loss("the train-mode forward returned no init_disp_up".into())
+    // One scope for the forward and the backward: the convolutions prepare each weight tensor
+    // once (the ConvGRU runs its layers every iteration, the input gradients read them again).
+    let (grads, terms) = nn::conv::with_prepared_weights(|| -> Result<_, TrainError> {
+        let out = model.forward(left, right, cfg.run.train_iters, false);
+        let init = out.init_disp_up.ok_or_else(|| {
+            TrainError::Loss("the train-mode forward returned no init_disp_up".into())
+        })?;
+        let loss = sequence_loss(&cfg.loss, &loss_batch, init, &out.disp_preds)
+            .map_err(|e| TrainError::Loss(e.to_string()))?;
+        Ok((loss.total.backward(), loss.terms))
     })?;
-    let loss = sequence_loss(&cfg.loss, &loss_batch, init, &out.disp_preds)
-        .map_err(|e| TrainError::Loss(e.to_string()))?;
-    let grads = loss.total.backward();
     let grads = GradientsParams::from_grads(grads, &model);
     let (model, report) = session.optimizer.step(lr, model, grads);
-    Ok((model, loss.terms, report))
+    Ok((model, terms, report))
 }
 
 /// Scores the model (test mode, `valid_iters`, no autodiff, BatchNorm3d on running statistics

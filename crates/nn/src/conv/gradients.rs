@@ -7,7 +7,8 @@
 use rayon::prelude::*;
 
 use super::kernels::{
-    conv2d_nchw, conv_transpose2d_nchw, unfold_rows, Epilogue, Geometry, Nchw, TransposeGeometry,
+    conv2d_nchw, conv_transpose2d_nchw, Epilogue, Geometry, Nchw, TransposeGeometry,
+    MIN_TAP_CHANNELS,
 };
 use super::prepared::LayerWeights;
 use super::scratch::{Scratch, COLUMNS};
@@ -17,17 +18,25 @@ use crate::matmul::{gemm_f32, Strided};
 /// band's pixels, so longer bands make fewer, better-shaped products.
 const GRAD_COLUMN_FLOATS: usize = 1 << 20;
 
-/// `∂L/∂x` (`[b, ci, h, w]`) of a convolution of an `h × w` input with `weight`
+/// Largest `ci·co` whose stride-1 weight gradient runs as tap GEMMs ([`weight_grad_by_taps`]);
+/// wider layers make one large unfolded GEMM pay better (measured on the MonSter++ layers).
+const MAX_TAP_GRAD_CHANNEL_PAIRS: usize = 128 * 128;
+
+/// Fewest pixels per weight-gradient GEMM of [`weight_grad_by_taps`]: shorter bands spend more
+/// on the partial sums than they gain in balance.
+const MIN_BAND_PIXELS: usize = 256;
+
+/// `∂L/∂x` (`[b, ci, h, w]`) of a convolution of an `h × w` input with `weights`
 /// (`[co, ci, kh, kw]`), from `grad` (`∂L/∂y`, `[b, co, oh, ow]`).
 pub fn conv2d_input_grad(
     grad: &[f32],
     grad_shape: Nchw,
-    weight: &[f32],
-    ci: usize,
+    weights: &LayerWeights,
     [h, w]: [usize; 2],
     geometry: Geometry,
 ) -> Vec<f32> {
     let Nchw { b, c: co, .. } = grad_shape;
+    let (weight, ci) = (weights.raw(), weights.ci());
     let [kh, kw] = geometry.kernel;
     let [dh, dw] = geometry.dilation;
     let [top, left, bottom, right] = geometry.padding;
@@ -39,12 +48,17 @@ pub fn conv2d_input_grad(
     );
     if geometry.stride == [1, 1] && top.max(bottom) <= span_h && left.max(right) <= span_w {
         // x̄ = ȳ ⋆ flip(W)ᵀ, padded by the kernel's span less the forward padding.
-        let flipped = LayerWeights::new(flip_transpose(weight, co, ci, kh * kw), ci, kh * kw);
         let transposed = Geometry {
             padding: [span_h - top, span_w - left, span_h - bottom, span_w - right],
             ..geometry
         };
-        let (out, size) = conv2d_nchw(grad, grad_shape, &flipped, transposed, Epilogue::bias(None));
+        let (out, size) = conv2d_nchw(
+            grad,
+            grad_shape,
+            weights.flipped(),
+            transposed,
+            Epilogue::bias(None),
+        );
         assert_eq!(size, [h, w], "conv2d_input_grad: output size");
         return out;
     }
@@ -102,33 +116,63 @@ pub fn conv2d_weight_grad(
         b * co * oh * ow,
         "conv2d_weight_grad: gradient size"
     );
-    let k = ci * kh * kw;
-    let mut out = vec![0.0f32; co * k];
+    let thin = ci * co <= MAX_TAP_GRAD_CHANNEL_PAIRS || kh * kw == 1;
+    if geometry.stride == [1, 1] && ci >= MIN_TAP_CHANNELS && thin {
+        return weight_grad_by_taps(input, shape, grad, co, geometry);
+    }
+    weight_grad_unfolded(input, shape, grad, co, geometry)
+}
+
+/// The weight gradient as one GEMM per band of output rows with the input unfolded
+/// pixel-major (`[pixels, taps·ci]`, a row of every tap's channels per output pixel): the
+/// unfolded band is then the GEMM's column-major left operand, which it reads in place
+/// instead of repacking it on one thread.
+fn weight_grad_unfolded(
+    input: &[f32],
+    shape: Nchw,
+    grad: &[f32],
+    co: usize,
+    geometry: Geometry,
+) -> Vec<f32> {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    let [sh, sw] = geometry.stride;
+    let [dh, dw] = geometry.dilation;
+    let [hp, wp] = geometry.padded([h, w]);
+    let [oh, ow] = geometry.output([h, w]);
+    let taps = kh * kw;
+    let k = taps * ci;
+    let x_hwc = padded_pixel_major(input, shape, geometry);
+    // `[co, taps, ci]`: the unfolded rows' order.
+    let mut by_tap = vec![0.0f32; co * k];
     let rows_per_band = (GRAD_COLUMN_FLOATS / (k * ow)).clamp(1, oh);
     let mut columns = Scratch::take(&COLUMNS, k * rows_per_band * ow);
     let mut first = true;
     for n in 0..b {
-        let image = &input[n * ci * h * w..(n + 1) * ci * h * w];
+        let image = &x_hwc[n * hp * wp * ci..][..hp * wp * ci];
         for r0 in (0..oh).step_by(rows_per_band) {
             let rows = rows_per_band.min(oh - r0);
             let pixels = rows * ow;
-            unfold_rows(
-                image,
-                [ci, h, w],
-                geometry,
-                r0,
-                rows,
-                &mut columns[..k * pixels],
-            );
-            // SAFETY: dst is `[co, k]` row-major (`out`); lhs is the band of ȳ, `co × pixels`
-            // at row stride `oh·ow` inside image `n`; rhs is the unfolded band read transposed,
-            // `pixels × k` (element `(p, j)` at `j·pixels + p`) inside `columns`.
+            columns[..k * pixels]
+                .par_chunks_exact_mut(k)
+                .enumerate()
+                .for_each(|(p, dst)| {
+                    let (y, x) = ((r0 + p / ow) * sh, (p % ow) * sw);
+                    for (tap, d) in dst.chunks_exact_mut(ci).enumerate() {
+                        let (i, j) = (tap / kw, tap % kw);
+                        let at = ((y + i * dh) * wp + x + j * dw) * ci;
+                        d.copy_from_slice(&image[at..at + ci]);
+                    }
+                });
+            // SAFETY: dst is `[co, k]` row-major (`by_tap`) read as `k × co` column-major; lhs
+            // is the unfolded band, `k × pixels` column-major inside `columns`; rhs is the band
+            // of ȳ read transposed, `pixels × co` with columns `oh·ow` apart inside image `n`.
             unsafe {
                 gemm_f32(
-                    [co, k, pixels],
-                    Strided::rows(out.as_mut_ptr(), k),
-                    Strided::rows(grad.as_ptr().add(n * co * oh * ow + r0 * ow), oh * ow),
-                    Strided::columns(columns.as_ptr(), pixels),
+                    [k, co, pixels],
+                    Strided::columns(by_tap.as_mut_ptr(), k),
+                    Strided::columns(columns.as_ptr(), k),
+                    Strided::columns(grad.as_ptr().add(n * co * oh * ow + r0 * ow), oh * ow),
                     !first,
                     1.0,
                     gemm::Parallelism::Rayon(0),
@@ -138,6 +182,121 @@ pub fn conv2d_weight_grad(
         }
     }
     columns.give_back(&COLUMNS);
+    let mut out = vec![0.0f32; co * k];
+    out.par_chunks_exact_mut(k)
+        .zip(by_tap.par_chunks_exact(k))
+        .for_each(|(dst, src)| {
+            for (tap, channels) in src.chunks_exact(ci).enumerate() {
+                for (c, v) in channels.iter().enumerate() {
+                    dst[c * taps + tap] = *v;
+                }
+            }
+        });
+    out
+}
+
+/// The input zero-padded by the geometry's padding and stored pixel-major: `[b, hp, wp, ci]`.
+fn padded_pixel_major(input: &[f32], shape: Nchw, geometry: Geometry) -> Vec<f32> {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [top, left, _, _] = geometry.padding;
+    let [hp, wp] = geometry.padded([h, w]);
+    let mut x_hwc = vec![0.0f32; b * hp * wp * ci];
+    x_hwc
+        .par_chunks_exact_mut(wp * ci)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let (n, y) = (row / hp, row % hp);
+            if y < top || y >= top + h {
+                return;
+            }
+            let image = &input[n * ci * h * w..][..ci * h * w];
+            for (c, plane) in image.chunks_exact(h * w).enumerate() {
+                let src = &plane[(y - top) * w..][..w];
+                for (x, v) in src.iter().enumerate() {
+                    dst[(left + x) * ci + c] = *v;
+                }
+            }
+        });
+    x_hwc
+}
+
+/// The stride-1 weight gradient without an unfolded input: with the input padded and stored
+/// pixel-major (`[hp·wp, ci]`) and `ȳ` widened to the padded width (zeros past `ow`), tap
+/// `(i, j)` reads the input as one strided matrix starting `i·dh` rows and `j·dw` columns in,
+/// so `∂L/∂W[:, :, i, j]ᵀ = x_tapᵀ · ȳᵀ` is a single GEMM over the pixels whose operands both
+/// have unit stride along their outer dimension (the GEMM packs nothing). Taps and bands of
+/// pixels run as independent single-threaded GEMMs into partial sums, added at the end.
+fn weight_grad_by_taps(
+    input: &[f32],
+    shape: Nchw,
+    grad: &[f32],
+    co: usize,
+    geometry: Geometry,
+) -> Vec<f32> {
+    let Nchw { b, c: ci, h, w } = shape;
+    let [kh, kw] = geometry.kernel;
+    let [dh, dw] = geometry.dilation;
+
+    let [hp, wp] = geometry.padded([h, w]);
+    let [oh, ow] = geometry.output([h, w]);
+    // Pixels of the widened output: the last row stops at `ow`, so that every tap's view ends
+    // inside the padded image.
+    let pixels = (oh - 1) * wp + ow;
+    let x_hwc = padded_pixel_major(input, shape, geometry);
+    let mut grad_wide = vec![0.0f32; b * co * pixels];
+    grad_wide
+        .par_chunks_exact_mut(pixels)
+        .zip(grad.par_chunks_exact(oh * ow))
+        .for_each(|(dst, src)| {
+            for (d, s) in dst.chunks_mut(wp).zip(src.chunks_exact(ow)) {
+                d[..ow].copy_from_slice(s);
+            }
+        });
+    let taps = kh * kw;
+    let bands = (4 * rayon::current_num_threads())
+        .div_ceil(taps)
+        .min(pixels.div_ceil(MIN_BAND_PIXELS))
+        .max(1);
+    let band = pixels.div_ceil(bands);
+    let partial: Vec<Vec<f32>> = (0..taps * bands)
+        .into_par_iter()
+        .map(|task| {
+            let (tap, p0) = (task / bands, (task % bands) * band);
+            let len = band.min(pixels - p0);
+            let shift = (tap / kw) * dh * wp + (tap % kw) * dw;
+            let mut sum = vec![0.0f32; co * ci];
+            for n in 0..b {
+                let x = &x_hwc[(n * hp * wp + shift + p0) * ci..][..len * ci];
+                let g = &grad_wide[n * co * pixels + p0..];
+                // SAFETY: dst is `[co, ci]` row-major read as `ci × co` column-major (`sum`);
+                // lhs is `ci × len` with columns `ci` apart inside `x`; rhs is `len × co` with
+                // columns `pixels` apart inside `g` (the last column ends at `(co − 1)·pixels +
+                // p0 + len ≤ co·pixels`).
+                unsafe {
+                    gemm_f32(
+                        [ci, co, len],
+                        Strided::columns(sum.as_mut_ptr(), ci),
+                        Strided::columns(x.as_ptr(), ci),
+                        Strided::columns(g.as_ptr(), pixels),
+                        n > 0,
+                        1.0,
+                        gemm::Parallelism::None,
+                    );
+                }
+            }
+            sum
+        })
+        .collect();
+    let mut out = vec![0.0f32; co * ci * taps];
+    out.par_chunks_exact_mut(ci * taps)
+        .enumerate()
+        .for_each(|(o, dst)| {
+            for (tap, bands_of_tap) in partial.chunks_exact(bands).enumerate() {
+                for c in 0..ci {
+                    dst[c * taps + tap] = bands_of_tap.iter().map(|s| s[o * ci + c]).sum();
+                }
+            }
+        });
     out
 }
 
@@ -153,19 +312,4 @@ pub fn bias_grad(grad: &[f32], shape: Nchw) -> Vec<f32> {
                 .sum()
         })
         .collect()
-}
-
-/// `[co, ci, taps]` → `[ci, co, taps]` with the taps reversed (the kernel rotated by 180°).
-fn flip_transpose(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
-    let mut out = vec![0.0f32; weight.len()];
-    for o in 0..co {
-        for i in 0..ci {
-            let src = &weight[(o * ci + i) * taps..][..taps];
-            let dst = &mut out[(i * co + o) * taps..][..taps];
-            for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
-                *d = *s;
-            }
-        }
-    }
-    out
 }

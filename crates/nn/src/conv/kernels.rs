@@ -18,7 +18,7 @@ const COLUMN_FLOATS: usize = 1 << 18;
 
 /// Input channels from which a stride-1 convolution runs as tap GEMMs; thinner inputs make
 /// GEMMs too thin to pay, so they are unfolded (`k = c·kh·kw` instead of `c`).
-const MIN_TAP_CHANNELS: usize = 16;
+pub(super) const MIN_TAP_CHANNELS: usize = 16;
 
 /// Shape of an NCHW tensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -26,6 +26,7 @@ pub struct LayerWeights {
     taps: usize,
     winograd: OnceLock<Vec<f32>>,
     tap_major: OnceLock<Vec<f32>>,
+    flipped: OnceLock<Box<LayerWeights>>,
 }
 
 impl LayerWeights {
@@ -42,6 +43,7 @@ impl LayerWeights {
             taps,
             winograd: OnceLock::new(),
             tap_major: OnceLock::new(),
+            flipped: OnceLock::new(),
         }
     }
 
@@ -55,7 +57,8 @@ impl LayerWeights {
         self.co
     }
 
-    fn ci(&self) -> usize {
+    /// Input channels.
+    pub fn ci(&self) -> usize {
         self.raw.len() / (self.co * self.taps)
     }
 
@@ -66,6 +69,25 @@ impl LayerWeights {
             .get_or_init(|| transform_weights(&self.raw, self.co, self.ci()))
     }
 
+    /// The kernel rotated by 180° with its channels swapped (`[ci, co, kh, kw]`): the weights
+    /// of the stride-1 convolution that gives a convolution's input gradient.
+    pub fn flipped(&self) -> &LayerWeights {
+        self.flipped.get_or_init(|| {
+            let (co, ci, taps) = (self.co, self.ci(), self.taps);
+            let mut out = vec![0.0f32; self.raw.len()];
+            for o in 0..co {
+                for i in 0..ci {
+                    let src = &self.raw[(o * ci + i) * taps..][..taps];
+                    let dst = &mut out[(i * co + o) * taps..][..taps];
+                    for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
+                        *d = *s;
+                    }
+                }
+            }
+            Box::new(LayerWeights::new(out, ci, taps))
+        })
+    }
+
     /// Tap-major `[taps, co, ci]`: one `[co, ci]` matrix per kernel tap.
     pub(super) fn tap_major(&self) -> &[f32] {
         self.tap_major
@@ -73,7 +95,22 @@ impl LayerWeights {
     }
 }
 
-type Cache = HashMap<(ParamId, &'static str), Arc<LayerWeights>>;
+/// What a cache entry was made from: a parameter (one layout of it per `&str`), or a tensor's
+/// buffer, by the address and length of its values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Key {
+    Param(ParamId, &'static str),
+    Buffer(usize, usize),
+}
+
+/// A cache entry; `_pin` keeps the buffer an entry was made from alive (and, shared, immutable),
+/// so that no other tensor can take its address while the entry lives.
+struct Entry {
+    weights: Arc<LayerWeights>,
+    _pin: Option<Box<dyn std::any::Any>>,
+}
+
+type Cache = HashMap<Key, Entry>;
 
 thread_local! {
     static DEPTH: Cell<usize> = const { Cell::new(0) };
@@ -107,15 +144,42 @@ pub(crate) fn prepared(
     what: &'static str,
     make: impl FnOnce() -> LayerWeights,
 ) -> Arc<LayerWeights> {
+    cached(Key::Param(id, what), None, make)
+}
+
+/// The weights made from the values `raw` of a tensor, from the scope's cache or made by `make`.
+/// `pin` is the tensor (a shared handle on its buffer), kept with the entry: while it lives the
+/// buffer is neither freed nor written in place (burn copies a shared buffer before writing),
+/// so its address names these values. What a training step uses: its forward and backward run
+/// the same weight tensors many times (the ConvGRU's iterations, the input gradients), and
+/// the tensors change only in the optimiser step, outside the scope.
+pub(crate) fn prepared_for_buffer(
+    raw: &[f32],
+    pin: impl std::any::Any,
+    make: impl FnOnce() -> LayerWeights,
+) -> Arc<LayerWeights> {
+    let key = Key::Buffer(raw.as_ptr() as usize, raw.len());
+    cached(key, Some(Box::new(pin)), make)
+}
+
+fn cached(
+    key: Key,
+    pin: Option<Box<dyn std::any::Any>>,
+    make: impl FnOnce() -> LayerWeights,
+) -> Arc<LayerWeights> {
     if DEPTH.with(Cell::get) == 0 {
         return Arc::new(make());
     }
-    if let Some(hit) = CACHE.with(|c| c.borrow().get(&(id, what)).cloned()) {
+    if let Some(hit) = CACHE.with(|c| c.borrow().get(&key).map(|e| e.weights.clone())) {
         return hit;
     }
-    let made = Arc::new(make());
-    CACHE.with(|c| c.borrow_mut().insert((id, what), made.clone()));
-    made
+    let weights = Arc::new(make());
+    let entry = Entry {
+        weights: weights.clone(),
+        _pin: pin,
+    };
+    CACHE.with(|c| c.borrow_mut().insert(key, entry));
+    weights
 }
 
 #[cfg(test)]
@@ -148,5 +212,42 @@ mod tests {
             !Arc::ptr_eq(&c, &d),
             "dropped when the outermost scope ends"
         );
+    }
+
+    #[test]
+    fn buffers_kept_by_address_inside_a_scope() {
+        let values = vec![1.0f32; 18];
+        let make = || LayerWeights::new(values.clone(), 2, 9);
+        with_prepared_weights(|| {
+            let a = prepared_for_buffer(&values, (), make);
+            let b = prepared_for_buffer(&values, (), make);
+            assert!(Arc::ptr_eq(&a, &b), "the same buffer: kept");
+            let c = prepared_for_buffer(&values[..9], (), || LayerWeights::new(vec![1.0; 9], 1, 9));
+            assert!(!Arc::ptr_eq(&a, &c), "another length: another entry");
+        });
+        let d = prepared_for_buffer(&values, (), make);
+        let e = prepared_for_buffer(&values, (), make);
+        assert!(!Arc::ptr_eq(&d, &e), "no scope: nothing kept");
+    }
+
+    #[test]
+    fn flipped_rotates_the_kernel_and_swaps_channels() {
+        // co = 2, ci = 3, 2 taps: w[o, i, t] = 100·o + 10·i + t.
+        let raw: Vec<f32> = (0..2)
+            .flat_map(|o| {
+                (0..3).flat_map(move |i| (0..2).map(move |t| (100 * o + 10 * i + t) as f32))
+            })
+            .collect();
+        let w = LayerWeights::new(raw, 2, 2);
+        let f = w.flipped();
+        assert_eq!((f.co(), f.ci()), (3, 2));
+        for i in 0..3 {
+            for o in 0..2 {
+                for t in 0..2 {
+                    let want = (100 * o + 10 * i + (1 - t)) as f32;
+                    assert_eq!(f.raw()[(i * 2 + o) * 2 + t], want, "flipped[{i}, {o}, {t}]");
+                }
+            }
+        }
     }
 }

@@ -8,6 +8,9 @@
 //! `Autodiff<Flex>` with a hand-written backward on [`super::gradients`]); other dtypes fall back
 //! to burn's own convolution and its gradients.
 
+use std::borrow::Cow;
+use std::sync::Arc;
+
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
@@ -21,7 +24,7 @@ use burn::tensor::Tensor;
 
 use super::gradients::{bias_grad, conv2d_input_grad, conv2d_weight_grad};
 use super::kernels::{conv2d_nchw, Epilogue, Geometry, Nchw};
-use super::prepared::LayerWeights;
+use super::prepared::{prepared_for_buffer, LayerWeights};
 use crate::flex_tensor::{all_f32, dims, tensor, values};
 
 /// `conv2d(x, weight, bias)` (one group, explicit padding) on the kernels, differentiable where
@@ -110,6 +113,19 @@ impl ConvKernels for Flex {
     }
 }
 
+/// The kernels' view of a weight tensor `[co, ci, kh, kw]`, made once per
+/// [`with_prepared_weights`](super::with_prepared_weights) scope for the forward and the input
+/// gradient alike (keyed by the tensor's buffer where its values are contiguous).
+fn layer_weights(weight: &FlexTensor) -> Arc<LayerWeights> {
+    let [co, _, kh, kw] = dims::<4>(weight);
+    let raw = values(weight);
+    let make = || LayerWeights::new(raw.to_vec(), co, kh * kw);
+    match &raw {
+        Cow::Borrowed(contiguous) => prepared_for_buffer(contiguous, weight.clone(), make),
+        Cow::Owned(_) => Arc::new(make()),
+    }
+}
+
 /// [`ConvKernels::kernel_conv2d`] on `Flex`: burn's convolution for other dtypes.
 fn flex_conv2d(
     x: FlexTensor,
@@ -121,9 +137,9 @@ fn flex_conv2d(
         return <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
     }
     let [b, c, h, w] = dims::<4>(&x);
-    let [co, _, kh, kw] = dims::<4>(&weight);
+    let co = dims::<4>(&weight)[0];
     let geometry = geometry_of(&options, &weight);
-    let weights = LayerWeights::new(values(&weight).into_owned(), co, kh * kw);
+    let weights = layer_weights(&weight);
     let bias = bias.as_ref().map(values);
     let (out, [oh, ow]) = conv2d_nchw(
         &values(&x),
@@ -157,8 +173,7 @@ impl ConvGradKernels for Flex {
         let out = conv2d_input_grad(
             &values(&grad),
             shape,
-            &values(&weight),
-            ci,
+            &layer_weights(&weight),
             [h, w],
             geometry,
         );
