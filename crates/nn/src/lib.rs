@@ -37,6 +37,7 @@
 //! device, `Device::flex().autodiff()`); [`monster::upsample::freeze_bn`] is the per-subtree
 //! helper. [`monster::Monster::num_trainable_params`] counts what remains trainable.
 
+pub mod activation;
 pub mod attention;
 pub mod bench;
 pub mod config;

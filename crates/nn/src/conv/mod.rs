@@ -22,7 +22,9 @@ use std::sync::Arc;
 
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::nn::{BatchNorm, PaddingConfig2d};
-use burn::tensor::activation::{leaky_relu, relu};
+use burn::tensor::activation::relu;
+
+use crate::activation::leaky_relu;
 use burn::tensor::{Device, Tensor, TensorData};
 
 pub use kernels::{
@@ -253,7 +255,7 @@ fn burn_layers(y: Tensor<4>, bn: Option<&BatchNorm>, act: Activation) -> Tensor<
     match act {
         Activation::Identity => y,
         Activation::Relu => relu(y),
-        Activation::LeakyRelu(slope) => leaky_relu(y, slope as f64),
+        Activation::LeakyRelu(slope) => leaky_relu(y, slope),
     }
 }
 

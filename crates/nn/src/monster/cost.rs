@@ -19,7 +19,9 @@ use burn::nn::conv::{
     ConvTranspose3dConfig,
 };
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig3d};
-use burn::tensor::activation::{leaky_relu, sigmoid, softmax};
+use burn::tensor::activation::{sigmoid, softmax};
+
+use crate::activation::leaky_relu;
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
@@ -116,7 +118,7 @@ impl BasicConv2d {
         conv2d_fused(
             &self.conv,
             Some(&self.bn),
-            Activation::LeakyRelu(LEAKY_SLOPE as f32),
+            Activation::LeakyRelu(LEAKY_SLOPE),
             x,
         )
     }

@@ -14,13 +14,15 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::PaddingConfig2d;
-use burn::tensor::activation::{leaky_relu, relu};
+use burn::tensor::activation::relu;
+
+use crate::activation::leaky_relu;
 use burn::tensor::{Device, Tensor};
 
 use crate::conv::{conv2d_forward, conv_transpose2d_forward};
 
 /// Slope of PyTorch's default `nn.LeakyReLU()`, used by `BasicConv`/`BasicConv_IN`.
-pub const LEAKY_SLOPE: f64 = 0.01;
+pub const LEAKY_SLOPE: f32 = 0.01;
 /// `nn.InstanceNorm2d` default epsilon.
 pub const IN_EPS: f64 = 1e-5;
 
