@@ -11,7 +11,9 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::activation::{relu, tanh};
+use burn::tensor::activation::relu;
+
+use crate::activation::tanh;
 use burn::tensor::{Device, Tensor};
 
 use crate::conv::conv2d_forward;

@@ -19,9 +19,9 @@ use burn::nn::conv::{
     ConvTranspose3dConfig,
 };
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig3d};
-use burn::tensor::activation::{sigmoid, softmax};
+use burn::tensor::activation::softmax;
 
-use crate::activation::leaky_relu;
+use crate::activation::{leaky_relu, sigmoid};
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
