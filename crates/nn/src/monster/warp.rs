@@ -48,5 +48,5 @@ pub fn disp_warp(img: Tensor<4>, disp: Tensor<4>) -> Tensor<4> {
     let opts = GridSampleOptions::new(InterpolateMode::Bilinear)
         .with_padding_mode(GridSamplePaddingMode::Border)
         .with_align_corners(false);
-    img.grid_sample_2d(grid, opts)
+    crate::grid_sample::grid_sample_2d(img, grid, opts)
 }

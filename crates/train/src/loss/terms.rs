@@ -53,7 +53,7 @@ pub fn warp_right_to_left(right: Tensor<4>, disparity: Tensor<4>) -> Tensor<4> {
     let opts = GridSampleOptions::new(InterpolateMode::Bilinear)
         .with_padding_mode(GridSamplePaddingMode::Zeros)
         .with_align_corners(true);
-    right.grid_sample_2d(grid, opts)
+    nn::grid_sample::grid_sample_2d(right, grid, opts)
 }
 
 /// The release's `ssim_loss_map`: `(1 − SSIM)/2` averaged over channels, `[B, 1, H, W]`, with
