@@ -185,7 +185,9 @@ where
 
 #[cfg(test)]
 mod tests {
-    use burn::tensor::{Device, Distribution, Int};
+    use burn::tensor::{Device, Distribution};
+
+    use crate::test_support::position_weights;
 
     use super::*;
 
@@ -220,11 +222,7 @@ mod tests {
                         theirs_fn(x.clone())
                     };
                     let grad = tracked.then(|| {
-                        let count = y.dims().iter().product::<usize>() as i64;
-                        let r = Tensor::<1, Int>::arange(0..count, &device)
-                            .float()
-                            .sin()
-                            .reshape(y.dims());
+                        let r = position_weights(y.dims(), &device);
                         let grads = (y.clone() * r).sum().backward();
                         x.grad(&grads).expect("input gradient")
                     });

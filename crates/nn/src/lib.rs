@@ -56,3 +56,6 @@ pub mod profile;
 pub mod resize;
 pub mod segformer;
 pub mod weights;
+
+#[cfg(test)]
+mod test_support;

@@ -231,7 +231,9 @@ pub fn avg_pool_planes(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use burn::tensor::{Device, Distribution, Int};
+    use burn::tensor::{Device, Distribution};
+
+    use crate::test_support::position_weights;
 
     /// The plain kernel against burn's on the ConvGRU's pooling (3×3, stride 2, padding 1) of
     /// even and odd sizes, a 2×2 window without padding and the SSIM's 1-D box windows.
@@ -273,11 +275,7 @@ mod tests {
                     };
                     let grad = tracked.then(|| {
                         // The same upstream gradient for both: a function of the position.
-                        let count = y.dims().iter().product::<usize>() as i64;
-                        let r = Tensor::<1, Int>::arange(0..count, &device)
-                            .float()
-                            .sin()
-                            .reshape(y.dims());
+                        let r = position_weights(y.dims(), &device);
                         let grads = (y.clone() * r).sum().backward();
                         x.grad(&grads).expect("input gradient")
                     });

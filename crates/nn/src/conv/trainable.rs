@@ -321,7 +321,9 @@ where
 #[cfg(test)]
 mod tests {
     use burn::tensor::module::conv2d as burn_conv2d;
-    use burn::tensor::{Device, Distribution, Int};
+    use burn::tensor::{Device, Distribution};
+
+    use crate::test_support::position_weights;
 
     use super::*;
 
@@ -391,12 +393,7 @@ mod tests {
                     burn_conv2d(x.clone(), weight.clone(), bias.clone(), options.clone())
                 };
                 // A fixed, varied upstream gradient (the same for both runs).
-                let count = y.dims().iter().product::<usize>() as i64;
-                let upstream = Tensor::<1, Int>::arange(0..count, &device)
-                    .float()
-                    .mul_scalar(0.37)
-                    .sin()
-                    .reshape(y.dims());
+                let upstream = position_weights(y.dims(), &device);
                 let grads = (y.clone() * upstream).sum().backward();
                 (
                     y.inner(),
