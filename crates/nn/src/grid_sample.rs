@@ -149,6 +149,14 @@ fn corners(sampling: Sampling, gx: f32, gy: f32, [h, w]: [usize; 2]) -> Corners 
     }
 }
 
+/// The corners of every output position of an `[n, ho, wo, 2]` grid (row-major), computed once
+/// and shared by all channel planes and both gradient passes.
+fn corner_table(grid: &[f32], sampling: Sampling, size: [usize; 2]) -> Vec<Corners> {
+    grid.par_chunks_exact(2)
+        .map(|xy| corners(sampling, xy[0], xy[1], size))
+        .collect()
+}
+
 #[backend_extension(Flex, Autodiff)]
 pub trait GridSampleKernels: Backend {
     /// [`grid_sample_2d`], bilinear.
@@ -173,16 +181,16 @@ impl GridSampleKernels for Flex {
     fn kernel_grid_sample(input: FlexTensor, grid: FlexTensor, sampling: Sampling) -> FlexTensor {
         let [n, c, h, w] = dims(&input);
         let [_, ho, wo, _] = dims(&grid);
-        let (image, grid) = (values(&input), values(&grid));
+        let image = values(&input);
+        let table = corner_table(&values(&grid), sampling, [h, w]);
         let mut out = vec![0.0f32; n * c * ho * wo];
         out.par_chunks_exact_mut(ho * wo)
             .enumerate()
             .for_each(|(plane, dst)| {
                 let b = plane / c;
                 let src = &image[plane * h * w..][..h * w];
-                let g = &grid[b * ho * wo * 2..][..ho * wo * 2];
-                for (d, xy) in dst.iter_mut().zip(g.chunks_exact(2)) {
-                    let k = corners(sampling, xy[0], xy[1], [h, w]);
+                let table = &table[b * ho * wo..][..ho * wo];
+                for (d, k) in dst.iter_mut().zip(table) {
                     *d = (0..4)
                         .filter(|&i| k.used[i])
                         .map(|i| k.weight[i] * src[k.at[i]])
@@ -202,7 +210,8 @@ impl GridSampleGradKernels for Flex {
     ) -> (FlexTensor, FlexTensor) {
         let [n, c, h, w] = dims(&input);
         let [_, ho, wo, _] = dims(&grid);
-        let (image, grid, grad) = (values(&input), values(&grid), values(&grad));
+        let (image, grad) = (values(&input), values(&grad));
+        let table = corner_table(&values(&grid), sampling, [h, w]);
         // ∂L/∂input: each plane scatters its own output gradient (planes are independent).
         let mut d_input = vec![0.0f32; n * c * h * w];
         d_input
@@ -210,10 +219,9 @@ impl GridSampleGradKernels for Flex {
             .enumerate()
             .for_each(|(plane, dst)| {
                 let b = plane / c;
-                let g = &grid[b * ho * wo * 2..][..ho * wo * 2];
+                let table = &table[b * ho * wo..][..ho * wo];
                 let up = &grad[plane * ho * wo..][..ho * wo];
-                for (&u, xy) in up.iter().zip(g.chunks_exact(2)) {
-                    let k = corners(sampling, xy[0], xy[1], [h, w]);
+                for (&u, k) in up.iter().zip(table) {
                     for i in (0..4).filter(|&i| k.used[i]) {
                         dst[k.at[i]] += k.weight[i] * u;
                     }
@@ -227,9 +235,8 @@ impl GridSampleGradKernels for Flex {
             .enumerate()
             .for_each(|(row, dst)| {
                 let b = row / ho;
-                let g = &grid[row * wo * 2..][..wo * 2];
-                for (ox, (d, xy)) in dst.chunks_exact_mut(2).zip(g.chunks_exact(2)).enumerate() {
-                    let k = corners(sampling, xy[0], xy[1], [h, w]);
+                let table = &table[row * wo..][..wo];
+                for (ox, (d, k)) in dst.chunks_exact_mut(2).zip(table).enumerate() {
                     let (fx, fy) = (k.x.frac, k.y.frac);
                     let (mut sx, mut sy) = (0.0f32, 0.0f32);
                     for ch in 0..c {

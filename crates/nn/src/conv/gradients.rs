@@ -213,10 +213,12 @@ fn padded_pixel_major(input: &[f32], shape: Nchw, geometry: Geometry) -> Vec<f32
             let row = |c: usize| &image[c * h * w + (y - top) * w..][..w];
             // Eight channels at a time: eight read streams, eight consecutive writes per pixel.
             for c0 in (0..ci).step_by(8) {
-                let block = (c0..(c0 + 8).min(ci)).map(row).collect::<Vec<_>>();
+                let lanes = (ci - c0).min(8);
+                let block: [&[f32]; 8] = std::array::from_fn(|k| row((c0 + k).min(ci - 1)));
+                let block = &block[..lanes];
                 for x in 0..w {
-                    let d = &mut dst[(left + x) * ci + c0..][..block.len()];
-                    for (d, src) in d.iter_mut().zip(&block) {
+                    let d = &mut dst[(left + x) * ci + c0..][..lanes];
+                    for (d, src) in d.iter_mut().zip(block) {
                         *d = src[x];
                     }
                 }
@@ -241,7 +243,6 @@ fn weight_grad_by_taps(
     let Nchw { b, c: ci, h, w } = shape;
     let [kh, kw] = geometry.kernel;
     let [dh, dw] = geometry.dilation;
-
     let [hp, wp] = geometry.padded([h, w]);
     let [oh, ow] = geometry.output([h, w]);
     // Pixels of the widened output: the last row stops at `ow`, so that every tap's view ends

@@ -118,11 +118,11 @@ impl ConvKernels for Flex {
 /// gradient alike (keyed by the tensor's buffer where its values are contiguous).
 fn layer_weights(weight: &FlexTensor) -> Arc<LayerWeights> {
     let [co, _, kh, kw] = dims::<4>(weight);
-    let raw = values(weight);
-    let make = || LayerWeights::new(raw.to_vec(), co, kh * kw);
-    match &raw {
-        Cow::Borrowed(contiguous) => prepared_for_buffer(contiguous, weight.clone(), make),
-        Cow::Owned(_) => Arc::new(make()),
+    match values(weight) {
+        Cow::Borrowed(contiguous) => prepared_for_buffer(contiguous, weight.clone(), || {
+            LayerWeights::new(contiguous.to_vec(), co, kh * kw)
+        }),
+        Cow::Owned(copied) => Arc::new(LayerWeights::new(copied, co, kh * kw)),
     }
 }
 

@@ -12,10 +12,9 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::relu;
-
-use crate::activation::tanh;
 use burn::tensor::{Device, Tensor};
 
+use crate::activation::tanh;
 use crate::conv::conv2d_forward;
 
 use super::features::conv2d;

@@ -20,11 +20,10 @@ use burn::nn::conv::{
 };
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig3d};
 use burn::tensor::activation::softmax;
-
-use crate::activation::{leaky_relu, sigmoid};
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
+use crate::activation::{leaky_relu, sigmoid};
 use crate::conv::{conv2d_forward, conv2d_fused, conv_transpose2d_forward, Activation};
 
 use super::features::{

@@ -7,14 +7,13 @@
 //! `context_zqr_convs[i](relu(cnet_i)).split(C)`). Update order: gru16, gru08, motion encoder,
 //! gru04 (quirk: 16→8→4, the coarse levels see the *previous* finer states).
 
-use crate::activation::{sigmoid, tanh};
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{PaddingConfig2d, Relu};
 use burn::tensor::{Device, Tensor, TensorData};
-
 use rayon::prelude::*;
 
+use crate::activation::{sigmoid, tanh};
 use crate::conv::{
     conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, layer_weights, prepared,
     Activation, Epilogue, Geometry, LayerWeights, Nchw,
