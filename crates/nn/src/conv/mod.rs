@@ -16,6 +16,7 @@ mod kernels;
 mod prepared;
 mod scratch;
 mod trainable;
+mod volume;
 mod winograd;
 
 use std::sync::Arc;
@@ -32,6 +33,7 @@ pub use kernels::{
 };
 pub(crate) use prepared::prepared;
 pub use prepared::{with_prepared_weights, LayerWeights};
+pub use volume::{conv3d_forward, conv_transpose3d_forward, Geometry3};
 
 /// `conv.forward(x)`.
 pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
@@ -119,9 +121,6 @@ pub fn conv_transpose2d_fused(
     act: Activation,
     x: Tensor<4>,
 ) -> Tensor<4> {
-    if conv.groups != 1 || !on_cpu_inference(&x) {
-        return burn_layers(conv.forward(x), bn, act);
-    }
     let geometry = TransposeGeometry {
         kernel: conv.kernel_size,
         stride: conv.stride,
@@ -130,7 +129,17 @@ pub fn conv_transpose2d_fused(
         padding_out: conv.padding_out,
     };
     let bias = conv.bias.as_ref().map(|b| b.val());
-    conv_transpose2d_with(x, conv.weight.val(), bias, geometry, bn, act)
+    match (conv.groups, cpu_mode(&x)) {
+        (1, Some(CpuMode::Inference)) => {
+            conv_transpose2d_with(x, conv.weight.val(), bias, geometry, bn, act)
+        }
+        (1, Some(CpuMode::Training)) => burn_layers(
+            trainable::conv_transpose2d(x, conv.weight.val(), bias, geometry),
+            bn,
+            act,
+        ),
+        _ => burn_layers(conv.forward(x), bn, act),
+    }
 }
 
 /// [`conv_transpose2d_fused`] on bare tensors (`weight` `[ci, co, kh, kw]`, one group); the

@@ -24,7 +24,10 @@ use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
 use crate::activation::{leaky_relu, sigmoid};
-use crate::conv::{conv2d_forward, conv2d_fused, conv_transpose2d_forward, Activation};
+use crate::conv::{
+    conv2d_forward, conv2d_fused, conv3d_forward, conv_transpose2d_forward,
+    conv_transpose3d_forward, Activation,
+};
 
 use super::features::{
     conv2d, conv_in_block, conv_in_block_forward, instance_norm, BasicConvIn, ConvInBlock,
@@ -151,7 +154,7 @@ impl BasicConv3d {
     }
 
     pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {
-        leaky_relu(self.bn.forward(self.conv.forward(x)), LEAKY_SLOPE)
+        leaky_relu(self.bn.forward(conv3d_forward(&self.conv, x)), LEAKY_SLOPE)
     }
 }
 
@@ -181,7 +184,7 @@ impl BasicDeconv3d {
 
     /// `[B, c_in, D, H, W]` → `[B, c_out, 2D, 2H, 2W]`.
     pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {
-        let y = self.conv.forward(x);
+        let y = conv_transpose3d_forward(&self.conv, x);
         if self.bn_relu {
             leaky_relu(self.bn.forward(y), LEAKY_SLOPE)
         } else {
@@ -345,7 +348,7 @@ impl CostAggregation {
 
     /// Classifier logits `[B, D, h, w]` of a geometry encoding volume.
     pub fn logits(&self, geo_volume: Tensor<5>) -> Tensor<4> {
-        let l: Tensor<5> = self.classifier.forward(geo_volume);
+        let l: Tensor<5> = conv3d_forward(&self.classifier, geo_volume);
         l.squeeze_dim(1)
     }
 

@@ -1,0 +1,769 @@
+//! 3-D convolutions and transposed convolutions (the cost-volume hourglass of MonSter++) on the
+//! CPU device, as burn operations with their backward. Each batch item's input is unfolded in
+//! bands of output depth planes and multiplied by the weight on the `gemm` crate; the input
+//! gradient is the transposed product folded back, the weight gradient the output gradient
+//! times the unfolded input. A transposed convolution is the input gradient of the convolution
+//! with the same weight (and its backward that convolution's forward and weight gradient), so
+//! three kernels serve both layers.
+//!
+//! Why: burn's CPU 3-D convolutions and their gradients were the largest burn kernels left in a
+//! MonSter++ training step (BENCHMARKS.md, "SegFormer and the training step against PyTorch").
+
+use std::ops::Range;
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::NodeId;
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
+use burn::nn::conv::{Conv3d, ConvTranspose3d};
+use burn::nn::PaddingConfig3d;
+use burn::tensor::Tensor;
+use rayon::prelude::*;
+
+use super::cpu_mode;
+use crate::flex_tensor::{dims, tensor, values};
+use crate::matmul::{gemm_f32, Strided};
+
+/// Floats of unfolded input per GEMM (16 MiB): bounds the scratch of a large volume while
+/// keeping each product long.
+const BAND_FLOATS: usize = 1 << 22;
+
+/// The shape of a one-group 3-D convolution (the same padding before and after each axis).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Geometry3 {
+    pub kernel: [usize; 3],
+    pub stride: [usize; 3],
+    pub padding: [usize; 3],
+    pub dilation: [usize; 3],
+}
+
+impl Geometry3 {
+    fn taps(&self) -> usize {
+        self.kernel.iter().product()
+    }
+
+    /// The output size of an input of `size` (depth, height, width).
+    fn output(&self, size: [usize; 3]) -> [usize; 3] {
+        std::array::from_fn(|a| {
+            let span = self.dilation[a] * (self.kernel[a] - 1) + 1;
+            (size[a] + 2 * self.padding[a] - span) / self.stride[a] + 1
+        })
+    }
+
+    /// The output size of a transposed convolution of an input of `size`.
+    fn transposed_output(&self, size: [usize; 3], padding_out: [usize; 3]) -> [usize; 3] {
+        std::array::from_fn(|a| {
+            (size[a] - 1) * self.stride[a]
+                + self.dilation[a] * (self.kernel[a] - 1)
+                + 1
+                + padding_out[a]
+                - 2 * self.padding[a]
+        })
+    }
+
+    /// A 1×1×1 convolution that reads its input as it is: the input is its own unfolding.
+    fn is_pointwise(&self) -> bool {
+        self.kernel == [1; 3] && self.stride == [1; 3] && self.padding == [0; 3]
+    }
+}
+
+/// `[b, c, d, h, w]`.
+type Ncdhw = [usize; 5];
+
+/// The output positions `[lo, hi)` along one axis at which kernel offset `k` reads inside an
+/// input of `size`, and the input index read at `lo`.
+fn valid_span(
+    out: usize,
+    size: usize,
+    k: usize,
+    stride: usize,
+    pad: usize,
+    dil: usize,
+) -> (Range<usize>, usize) {
+    // Input index at output o: o·stride + k·dil − pad.
+    let shift = (k * dil) as isize - pad as isize;
+    let lo = if shift >= 0 { 0 } else { (-shift) as usize }.div_ceil(stride);
+    let last = size as isize - 1 - shift;
+    let hi = if last < 0 {
+        0
+    } else {
+        (last as usize / stride + 1).min(out)
+    };
+    let lo = lo.min(hi);
+    (
+        lo..hi,
+        (lo as isize * stride as isize + shift).max(0) as usize,
+    )
+}
+
+/// For tap `t` and the output depth planes `planes`: each output line `(oz, oy)` as its offset in
+/// a band row, the offset of the input line it reads (`None` in the padding), the output columns
+/// that read inside the input and the input column of the first of them.
+fn for_each_line(
+    geometry: &Geometry3,
+    size: [usize; 3],
+    out: [usize; 3],
+    planes: Range<usize>,
+    tap: usize,
+    mut line: impl FnMut(usize, Option<usize>, Range<usize>, usize),
+) {
+    let [kd, kh, kw] = geometry.kernel;
+    let offset = [tap / (kh * kw), tap / kw % kh, tap % kw];
+    let spans: [_; 3] = std::array::from_fn(|a| {
+        valid_span(
+            out[a],
+            size[a],
+            offset[a],
+            geometry.stride[a],
+            geometry.padding[a],
+            geometry.dilation[a],
+        )
+    });
+    debug_assert!(offset[0] < kd);
+    let [_, h, w] = size;
+    let [_, oh, ow] = out;
+    let (columns, first_column) = spans[2].clone();
+    for (i, oz) in planes.enumerate() {
+        for oy in 0..oh {
+            let at = (i * oh + oy) * ow;
+            let z = spans[0]
+                .0
+                .contains(&oz)
+                .then(|| spans[0].1 + (oz - spans[0].0.start) * geometry.stride[0]);
+            let y = spans[1]
+                .0
+                .contains(&oy)
+                .then(|| spans[1].1 + (oy - spans[1].0.start) * geometry.stride[1]);
+            let source = z.zip(y).map(|(z, y)| (z * h + y) * w);
+            line(at, source, columns.clone(), first_column);
+        }
+    }
+}
+
+/// Rows `c·taps + t` of the unfolded input `x` (`[ci, d, h, w]`) for the output depth planes
+/// `planes`: row `(c, t)`, column `p` holds what tap `t` of channel `c` reads for output position
+/// `p` of the band (zero in the padding).
+fn unfold_band(
+    x: &[f32],
+    size: [usize; 3],
+    geometry: &Geometry3,
+    out: [usize; 3],
+    planes: Range<usize>,
+    cols: &mut [f32],
+) {
+    let taps = geometry.taps();
+    let volume = size.iter().product::<usize>();
+    let band = planes.len() * out[1] * out[2];
+    let stride = geometry.stride[2];
+    cols.par_chunks_exact_mut(band)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let src = &x[row / taps * volume..][..volume];
+            for_each_line(
+                geometry,
+                size,
+                out,
+                planes.clone(),
+                row % taps,
+                |at, source, columns, first| {
+                    let dst = &mut dst[at..][..out[2]];
+                    let Some(source) = source else {
+                        dst.fill(0.0);
+                        return;
+                    };
+                    dst[..columns.start].fill(0.0);
+                    dst[columns.end..].fill(0.0);
+                    let src = &src[source + first..];
+                    for (k, d) in dst[columns].iter_mut().enumerate() {
+                        *d = src[k * stride];
+                    }
+                },
+            );
+        });
+}
+
+/// Adds the unfolded gradient `cols` (rows `c·taps + t` over the band `planes`) back onto the
+/// input positions they were read from, into `dx` (`[ci, d, h, w]`); channels in parallel.
+fn fold_band(
+    cols: &[f32],
+    size: [usize; 3],
+    geometry: &Geometry3,
+    out: [usize; 3],
+    planes: Range<usize>,
+    dx: &mut [f32],
+) {
+    let taps = geometry.taps();
+    let volume = size.iter().product::<usize>();
+    let band = planes.len() * out[1] * out[2];
+    let stride = geometry.stride[2];
+    dx.par_chunks_exact_mut(volume)
+        .zip(cols.par_chunks_exact(taps * band))
+        .for_each(|(dst, rows)| {
+            for (tap, row) in rows.chunks_exact(band).enumerate() {
+                for_each_line(
+                    geometry,
+                    size,
+                    out,
+                    planes.clone(),
+                    tap,
+                    |at, source, columns, first| {
+                        let Some(source) = source else { return };
+                        let dst = &mut dst[source + first..];
+                        for (k, g) in row[at..][columns].iter().enumerate() {
+                            dst[k * stride] += g;
+                        }
+                    },
+                );
+            }
+        });
+}
+
+/// Output depth planes per band, so that a band's unfolded input stays near [`BAND_FLOATS`].
+fn band_planes(rows: usize, out: [usize; 3]) -> usize {
+    (BAND_FLOATS / (rows * out[1] * out[2]).max(1)).clamp(1, out[0])
+}
+
+fn bands(out: [usize; 3], per_band: usize) -> impl Iterator<Item = Range<usize>> {
+    (0..out[0])
+        .step_by(per_band)
+        .map(move |z| z..(z + per_band).min(out[0]))
+}
+
+/// `conv3d(x, weight)` of `x` (`shape`) with `weight` `[co, ci, kd, kh, kw]`: `[b, co, od, oh, ow]`
+/// and the output size.
+pub fn conv3d_ncdhw(
+    x: &[f32],
+    shape: Ncdhw,
+    weight: &[f32],
+    co: usize,
+    geometry: &Geometry3,
+) -> (Vec<f32>, [usize; 3]) {
+    let [b, ci, d, h, w] = shape;
+    let size = [d, h, w];
+    let out = geometry.output(size);
+    let (volume, positions) = (d * h * w, out.iter().product::<usize>());
+    let plane = out[1] * out[2];
+    let k = ci * geometry.taps();
+    assert_eq!(weight.len(), co * k, "conv3d: weight size");
+    let mut y = vec![0.0f32; b * co * positions];
+    let per_band = band_planes(k, out);
+    let mut cols = vec![
+        0.0f32;
+        if geometry.is_pointwise() {
+            0
+        } else {
+            k * per_band * plane
+        }
+    ];
+    for n in 0..b {
+        let x = &x[n * ci * volume..][..ci * volume];
+        for planes in bands(out, per_band) {
+            let band = planes.len() * plane;
+            let rhs = if geometry.is_pointwise() {
+                Strided::rows(x[planes.start * plane..].as_ptr(), positions)
+            } else {
+                unfold_band(
+                    x,
+                    size,
+                    geometry,
+                    out,
+                    planes.clone(),
+                    &mut cols[..k * band],
+                );
+                Strided::rows(cols.as_ptr(), band)
+            };
+            let dst = &mut y[(n * co * positions + planes.start * plane)..];
+            // SAFETY: the views address `co × band` outputs of this item (rows `positions`
+            // apart), the `co × k` weight and the `k × band` unfolded input or input.
+            unsafe {
+                gemm_f32(
+                    [co, band, k],
+                    Strided::rows(dst.as_mut_ptr(), positions),
+                    Strided::rows(weight.as_ptr(), k),
+                    rhs,
+                    false,
+                    1.0,
+                    gemm::Parallelism::Rayon(0),
+                );
+            }
+        }
+    }
+    (y, out)
+}
+
+/// `∂L/∂x` (`[b, ci, size]`) of [`conv3d_ncdhw`] from `grad` (`[b, co, od, oh, ow]`).
+pub fn conv3d_input_grad(
+    grad: &[f32],
+    grad_shape: Ncdhw,
+    weight: &[f32],
+    ci: usize,
+    size: [usize; 3],
+    geometry: &Geometry3,
+) -> Vec<f32> {
+    let [b, co, od, oh, ow] = grad_shape;
+    let out = [od, oh, ow];
+    let (volume, positions, plane) = (size.iter().product::<usize>(), od * oh * ow, oh * ow);
+    let k = ci * geometry.taps();
+    assert_eq!(weight.len(), co * k, "conv3d_input_grad: weight size");
+    assert_eq!(geometry.output(size), out, "conv3d_input_grad: output size");
+    let mut dx = vec![0.0f32; b * ci * volume];
+    let per_band = if geometry.is_pointwise() {
+        od
+    } else {
+        band_planes(k, out)
+    };
+    let mut cols = vec![0.0f32; k * per_band * plane];
+    for n in 0..b {
+        let dx = &mut dx[n * ci * volume..][..ci * volume];
+        for planes in bands(out, per_band) {
+            let band = planes.len() * plane;
+            let cols = &mut cols[..k * band];
+            // SAFETY: `cols` is `k × band`; the weight read transposed is `k × co`; the gradient
+            // view addresses `co × band` values of this item.
+            unsafe {
+                gemm_f32(
+                    [k, band, co],
+                    Strided::rows(cols.as_mut_ptr(), band),
+                    Strided::columns(weight.as_ptr(), k),
+                    Strided::rows(
+                        grad[(n * co * positions + planes.start * plane)..].as_ptr(),
+                        positions,
+                    ),
+                    false,
+                    1.0,
+                    gemm::Parallelism::Rayon(0),
+                );
+            }
+            if geometry.is_pointwise() {
+                dx.copy_from_slice(cols);
+            } else {
+                fold_band(cols, size, geometry, out, planes, dx);
+            }
+        }
+    }
+    dx
+}
+
+/// `∂L/∂W` (`[co, ci, kd, kh, kw]`) of [`conv3d_ncdhw`] of `x` (`shape`) from `grad`
+/// (`[b, co, od, oh, ow]`).
+pub fn conv3d_weight_grad(
+    x: &[f32],
+    shape: Ncdhw,
+    grad: &[f32],
+    co: usize,
+    geometry: &Geometry3,
+) -> Vec<f32> {
+    let [b, ci, d, h, w] = shape;
+    let size = [d, h, w];
+    let out = geometry.output(size);
+    let (volume, positions, plane) = (d * h * w, out.iter().product::<usize>(), out[1] * out[2]);
+    let k = ci * geometry.taps();
+    let mut dw = vec![0.0f32; co * k];
+    let per_band = band_planes(k, out);
+    let mut cols = vec![
+        0.0f32;
+        if geometry.is_pointwise() {
+            0
+        } else {
+            k * per_band * plane
+        }
+    ];
+    for n in 0..b {
+        let x = &x[n * ci * volume..][..ci * volume];
+        for planes in bands(out, per_band) {
+            let band = planes.len() * plane;
+            let unfolded = if geometry.is_pointwise() {
+                Strided::columns(x[planes.start * plane..].as_ptr(), positions)
+            } else {
+                unfold_band(
+                    x,
+                    size,
+                    geometry,
+                    out,
+                    planes.clone(),
+                    &mut cols[..k * band],
+                );
+                Strided::columns(cols.as_ptr(), band)
+            };
+            // SAFETY: `dw` is `co × k`; the gradient view `co × band` values of this item; the
+            // unfolded input read transposed `band × k`.
+            unsafe {
+                gemm_f32(
+                    [co, k, band],
+                    Strided::rows(dw.as_mut_ptr(), k),
+                    Strided::rows(
+                        grad[(n * co * positions + planes.start * plane)..].as_ptr(),
+                        positions,
+                    ),
+                    unfolded,
+                    true,
+                    1.0,
+                    gemm::Parallelism::Rayon(0),
+                );
+            }
+        }
+    }
+    dw
+}
+
+/// `conv.forward(x)` on the kernels where they apply (the CPU device, one group, no bias,
+/// explicit padding), else burn's layer.
+pub fn conv3d_forward(conv: &Conv3d, x: Tensor<5>) -> Tensor<5> {
+    let padding = match conv.padding {
+        PaddingConfig3d::Explicit(d, h, w) => [d, h, w],
+        PaddingConfig3d::Valid => [0; 3],
+        PaddingConfig3d::Same => return conv.forward(x),
+    };
+    if conv.groups != 1 || conv.bias.is_some() || cpu_mode(&x).is_none() {
+        return conv.forward(x);
+    }
+    let geometry = Geometry3 {
+        kernel: conv.kernel_size,
+        stride: conv.stride,
+        padding,
+        dilation: conv.dilation,
+    };
+    let (x, weight) = (x.into_dispatch(), conv.weight.val().into_dispatch());
+    Tensor::from_dispatch(<Dispatch as VolumeConvKernels>::kernel_conv3d(
+        x, weight, geometry,
+    ))
+}
+
+/// `conv.forward(x)` for a transposed 3-D convolution (see [`conv3d_forward`]).
+pub fn conv_transpose3d_forward(conv: &ConvTranspose3d, x: Tensor<5>) -> Tensor<5> {
+    if conv.groups != 1 || conv.bias.is_some() || cpu_mode(&x).is_none() {
+        return conv.forward(x);
+    }
+    let geometry = Geometry3 {
+        kernel: conv.kernel_size,
+        stride: conv.stride,
+        padding: conv.padding,
+        dilation: conv.dilation,
+    };
+    let (x, weight) = (x.into_dispatch(), conv.weight.val().into_dispatch());
+    Tensor::from_dispatch(<Dispatch as VolumeConvKernels>::kernel_conv_transpose3d(
+        x,
+        weight,
+        geometry,
+        conv.padding_out,
+    ))
+}
+
+#[backend_extension(Flex, Autodiff)]
+pub trait VolumeConvKernels: Backend {
+    /// A one-group 3-D convolution without bias; `weight` `[co, ci, kd, kh, kw]`.
+    fn kernel_conv3d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        geometry: Geometry3,
+    ) -> FloatTensor<Self>;
+
+    /// A one-group transposed 3-D convolution without bias; `weight` `[ci, co, kd, kh, kw]`.
+    fn kernel_conv_transpose3d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        geometry: Geometry3,
+        padding_out: [usize; 3],
+    ) -> FloatTensor<Self>;
+}
+
+/// The gradients of [`VolumeConvKernels::kernel_conv3d`].
+pub trait VolumeConvGradKernels: Backend {
+    /// `∂L/∂x` for an input shaped like `x`.
+    fn kernel_conv3d_x_grad(
+        x: &FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        geometry: Geometry3,
+    ) -> FloatTensor<Self>;
+    fn kernel_conv3d_weight_grad(
+        x: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        geometry: Geometry3,
+    ) -> FloatTensor<Self>;
+}
+
+impl VolumeConvKernels for Flex {
+    fn kernel_conv3d(x: FlexTensor, weight: FlexTensor, geometry: Geometry3) -> FlexTensor {
+        let shape = dims::<5>(&x);
+        let co = dims::<5>(&weight)[0];
+        let (y, [od, oh, ow]) = conv3d_ncdhw(&values(&x), shape, &values(&weight), co, &geometry);
+        tensor(y, [shape[0], co, od, oh, ow])
+    }
+
+    fn kernel_conv_transpose3d(
+        x: FlexTensor,
+        weight: FlexTensor,
+        geometry: Geometry3,
+        padding_out: [usize; 3],
+    ) -> FlexTensor {
+        let shape = dims::<5>(&x);
+        let co = dims::<5>(&weight)[1];
+        let size = geometry.transposed_output([shape[2], shape[3], shape[4]], padding_out);
+        let y = conv3d_input_grad(&values(&x), shape, &values(&weight), co, size, &geometry);
+        tensor(y, [shape[0], co, size[0], size[1], size[2]])
+    }
+}
+
+impl VolumeConvGradKernels for Flex {
+    fn kernel_conv3d_x_grad(
+        x: &FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        geometry: Geometry3,
+    ) -> FlexTensor {
+        let [b, ci, d, h, w] = dims::<5>(x);
+        let dx = conv3d_input_grad(
+            &values(&grad),
+            dims::<5>(&grad),
+            &values(&weight),
+            ci,
+            [d, h, w],
+            &geometry,
+        );
+        tensor(dx, [b, ci, d, h, w])
+    }
+
+    fn kernel_conv3d_weight_grad(
+        x: FlexTensor,
+        grad: FlexTensor,
+        geometry: Geometry3,
+    ) -> FlexTensor {
+        let shape = dims::<5>(&x);
+        let co = dims::<5>(&grad)[1];
+        let dw = conv3d_weight_grad(&values(&x), shape, &values(&grad), co, &geometry);
+        let [kd, kh, kw] = geometry.kernel;
+        tensor(dw, [co, shape[1], kd, kh, kw])
+    }
+}
+
+/// The backward step of [`VolumeConvKernels::kernel_conv3d`]: parents `[x, weight]`; state: the
+/// checkpointed `x` and `weight`, and the geometry.
+#[derive(Debug)]
+struct Conv3dBackward;
+
+impl<B: VolumeConvKernels + VolumeConvGradKernels> Backward<B, 2> for Conv3dBackward {
+    type State = (NodeId, NodeId, Geometry3);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 2>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let grad = grads.consume::<B>(&ops.node);
+        let (x_state, weight_state, geometry) = ops.state;
+        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
+        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
+        if let Some(node) = &ops.parents[0] {
+            let dx = B::kernel_conv3d_x_grad(&x, weight, grad.clone(), geometry);
+            grads.register::<B>(node.id, dx);
+        }
+        if let Some(node) = &ops.parents[1] {
+            grads.register::<B>(node.id, B::kernel_conv3d_weight_grad(x, grad, geometry));
+        }
+    }
+}
+
+/// The backward step of [`VolumeConvKernels::kernel_conv_transpose3d`]: the input gradient is
+/// the convolution of the output gradient, the weight gradient that convolution's weight
+/// gradient with the roles of input and output gradient swapped.
+#[derive(Debug)]
+struct ConvTranspose3dBackward;
+
+impl<B: VolumeConvKernels + VolumeConvGradKernels> Backward<B, 2> for ConvTranspose3dBackward {
+    type State = (NodeId, NodeId, Geometry3);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 2>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let grad = grads.consume::<B>(&ops.node);
+        let (x_state, weight_state, geometry) = ops.state;
+        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
+        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
+        if let Some(node) = &ops.parents[0] {
+            grads.register::<B>(node.id, B::kernel_conv3d(grad.clone(), weight, geometry));
+        }
+        if let Some(node) = &ops.parents[1] {
+            grads.register::<B>(node.id, B::kernel_conv3d_weight_grad(grad, x, geometry));
+        }
+    }
+}
+
+impl<B, C> VolumeConvKernels for Autodiff<B, C>
+where
+    B: VolumeConvKernels + VolumeConvGradKernels,
+    C: CheckpointStrategy,
+{
+    fn kernel_conv3d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        geometry: Geometry3,
+    ) -> FloatTensor<Self> {
+        match Conv3dBackward
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (prep.checkpoint(&x), prep.checkpoint(&weight), geometry);
+                let out = B::kernel_conv3d(x.into_primitive(), weight.into_primitive(), geometry);
+                prep.finish(state, out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv3d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                geometry,
+            )),
+        }
+    }
+
+    fn kernel_conv_transpose3d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        geometry: Geometry3,
+        padding_out: [usize; 3],
+    ) -> FloatTensor<Self> {
+        match ConvTranspose3dBackward
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (prep.checkpoint(&x), prep.checkpoint(&weight), geometry);
+                let out = B::kernel_conv_transpose3d(
+                    x.into_primitive(),
+                    weight.into_primitive(),
+                    geometry,
+                    padding_out,
+                );
+                prep.finish(state, out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv_transpose3d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                geometry,
+                padding_out,
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::Module;
+    use burn::nn::conv::{Conv3dConfig, ConvTranspose3dConfig};
+    use burn::tensor::{Device, Distribution};
+
+    use crate::test_support::position_weights;
+
+    use super::*;
+
+    fn close<const D: usize>(what: &str, ours: Tensor<D>, burn: Tensor<D>) {
+        assert_eq!(ours.dims(), burn.dims(), "{what}: shape");
+        let ours = ours.into_data().try_to_vec::<f32>().unwrap();
+        let burn = burn.into_data().try_to_vec::<f32>().unwrap();
+        let scale = burn.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        let worst = ours
+            .iter()
+            .zip(&burn)
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            worst <= 1e-4 * scale,
+            "{what}: max difference {worst} (scale {scale})"
+        );
+    }
+
+    /// Runs `forward` with ours or burn's layer under autodiff; the output and the gradients of
+    /// the input and the weight.
+    fn outcome<M: Module>(
+        x: &Tensor<5>,
+        layer: &M,
+        weight: impl Fn(&M) -> Tensor<5>,
+        forward: impl Fn(&M, Tensor<5>) -> Tensor<5>,
+    ) -> [Tensor<5>; 3] {
+        let x = x.clone().require_grad();
+        let y = forward(layer, x.clone());
+        let upstream = position_weights(y.dims(), &y.device());
+        let grads = (y.clone() * upstream).sum().backward();
+        [
+            y.inner(),
+            x.grad(&grads).expect("x gradient"),
+            weight(layer).grad(&grads).expect("weight gradient"),
+        ]
+    }
+
+    /// Forward values and both gradients equal burn's layers: the hourglass's shapes (3³
+    /// stride 1 and 2, 1³, the 4³ stride-2 transposed convolution), dilation, batch 2, sizes
+    /// that strides do not divide, a band split over depth; and without autodiff the forward.
+    #[test]
+    fn convolutions_match_burn() {
+        let device = Device::flex().autodiff();
+        // (x dims, co, kernel, stride, padding, dilation)
+        let cases: [([usize; 5], usize, usize, usize, usize, usize); 5] = [
+            ([1, 8, 12, 9, 10], 8, 3, 1, 1, 1),
+            ([2, 6, 7, 10, 9], 12, 3, 2, 1, 1),
+            ([1, 5, 6, 7, 8], 7, 1, 1, 0, 1),
+            ([1, 4, 9, 8, 7], 6, 3, 1, 2, 2),
+            ([1, 3, 160, 40, 40], 4, 3, 1, 1, 1),
+        ];
+        for (dims, co, k, stride, pad, dil) in cases {
+            let x = Tensor::random(dims, Distribution::Normal(0.0, 1.0), &device);
+            let conv = Conv3dConfig::new([dims[1], co], [k; 3])
+                .with_stride([stride; 3])
+                .with_padding(PaddingConfig3d::Explicit(pad, pad, pad))
+                .with_dilation([dil; 3])
+                .with_bias(false)
+                .init(&device);
+            let weight = |c: &Conv3d| c.weight.val();
+            let ours = outcome(&x, &conv, weight, conv3d_forward);
+            let burn = outcome(&x, &conv, weight, |c, x| c.forward(x));
+            let what = format!("conv3d {dims:?} co{co} k{k} s{stride} p{pad} d{dil}");
+            for (name, (a, b)) in ["output", "∂x", "∂w"]
+                .iter()
+                .zip(ours.into_iter().zip(burn))
+            {
+                close(&format!("{what} {name}"), a, b);
+            }
+            let plain = conv.valid();
+            let x = x.inner();
+            close(
+                &format!("{what} inference"),
+                conv3d_forward(&plain, x.clone()),
+                plain.forward(x),
+            );
+        }
+        // (x dims, co, kernel, stride, padding, padding_out)
+        let cases: [([usize; 5], usize, usize, usize, usize, usize); 3] = [
+            ([1, 16, 6, 4, 5], 8, 4, 2, 1, 0),
+            ([2, 6, 3, 5, 4], 5, 3, 2, 1, 1),
+            ([1, 4, 5, 6, 7], 3, 3, 1, 1, 0),
+        ];
+        for (dims, co, k, stride, pad, pad_out) in cases {
+            let x = Tensor::random(dims, Distribution::Normal(0.0, 1.0), &device);
+            let conv = ConvTranspose3dConfig::new([dims[1], co], [k; 3])
+                .with_stride([stride; 3])
+                .with_padding([pad; 3])
+                .with_padding_out([pad_out; 3])
+                .with_bias(false)
+                .init(&device);
+            let weight = |c: &ConvTranspose3d| c.weight.val();
+            let ours = outcome(&x, &conv, weight, conv_transpose3d_forward);
+            let burn = outcome(&x, &conv, weight, |c, x| c.forward(x));
+            let what = format!("conv_transpose3d {dims:?} co{co} k{k} s{stride} p{pad} o{pad_out}");
+            for (name, (a, b)) in ["output", "∂x", "∂w"]
+                .iter()
+                .zip(ours.into_iter().zip(burn))
+            {
+                close(&format!("{what} {name}"), a, b);
+            }
+        }
+    }
+}
