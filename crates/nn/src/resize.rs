@@ -5,19 +5,27 @@
 //! with "Bilinear interpolation backward is not supported by JIT backend"), so training on a GPU
 //! needs another route: a tensor that takes part in an autodiff graph is resized axis by axis as
 //! `x[i0]·(1 − λ) + x[i1]·λ` with two `select`s, whose backward (a scatter-add) every backend
-//! has. Tensors outside a graph (inference), and every tensor on the CPU `flex` backend (whose
-//! kernel has a backward and trains 17 % faster than the select path), keep burn's kernel; on the
-//! CPU inference device a plain-buffer kernel ([`resize_bilinear_planes`]) runs instead, since
-//! burn's took 4 % of a MonSter++ pass (the ConvGRU resizes its hidden states at every
-//! iteration). All follow PyTorch's source-index rules, so they agree to float rounding
-//! (`tests/resize.rs`).
+//! has. On the CPU device a plain-buffer kernel ([`resize_bilinear_planes`]) runs instead: burn's
+//! took 4 % of a MonSter++ pass (the ConvGRU resizes its hidden states at every iteration), and
+//! in training it is a burn operation whose backward is its adjoint
+//! ([`resize_bilinear_planes_grad`]), where burn's single-threaded backward took 8 % of a
+//! training step. Other tensors keep burn's kernel. All follow PyTorch's source-index rules, so
+//! they agree to float rounding (`tests/resize.rs`).
 
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference};
+use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::flex_tensor::{dims, tensor, values};
 
 /// Bilinear resize of `B×C×H×W` to `size = [H', W']` with PyTorch's `align_corners` semantics.
 pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
@@ -29,6 +37,12 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> T
         let (device, [b, c, h, w]) = (x.device(), x.dims());
         let out = resize_bilinear_planes(&f32_vec(x), [h, w], size, align_corners);
         Tensor::from_data(TensorData::new(out, [b, c, size[0], size[1]]), &device)
+    } else if on_cpu_training(&x) && x.dtype() == DType::F32 {
+        Tensor::from_dispatch(<Dispatch as ResizeKernels>::kernel_resize_bilinear(
+            x.into_dispatch(),
+            size,
+            align_corners,
+        ))
     } else if x.is_tracked() && x.device().inner() != Device::flex() {
         resize_bilinear_separable(x, size, align_corners)
     } else {
@@ -98,6 +112,130 @@ pub fn resize_bilinear_planes(
             }
         });
     out
+}
+
+/// The adjoint of [`resize_bilinear_planes`]: `∂L/∂x` (planes of `size`) from `grad` (planes of
+/// `[oh, ow]`). Each output row's gradient is first gathered along x into one source-width row,
+/// then added to its two source rows.
+pub fn resize_bilinear_planes_grad(
+    grad: &[f32],
+    [oh, ow]: [usize; 2],
+    size: [usize; 2],
+    align_corners: bool,
+) -> Vec<f32> {
+    let [h, w] = size;
+    let rows = linear_taps(h, oh, align_corners);
+    let cols = linear_taps(w, ow, align_corners);
+    let mut dx = vec![0.0f32; grad.len() / (oh * ow).max(1) * h * w];
+    if dx.is_empty() {
+        return dx;
+    }
+    dx.par_chunks_exact_mut(h * w)
+        .zip(grad.par_chunks_exact(oh * ow))
+        .for_each(|(dst, src)| {
+            let mut row = vec![0.0f32; w];
+            for (y, g) in src.chunks_exact(ow).enumerate() {
+                row.fill(0.0);
+                for (x, &g) in g.iter().enumerate() {
+                    row[cols.i0[x] as usize] += cols.w0[x] * g;
+                    row[cols.i1[x] as usize] += cols.w1[x] * g;
+                }
+                for (i, weight) in [(rows.i0[y], rows.w0[y]), (rows.i1[y], rows.w1[y])] {
+                    let target = &mut dst[i as usize * w..][..w];
+                    for (d, &v) in target.iter_mut().zip(&row) {
+                        *d += weight * v;
+                    }
+                }
+            }
+        });
+    dx
+}
+
+#[backend_extension(Flex, Autodiff)]
+pub trait ResizeKernels: Backend {
+    /// [`resize_bilinear`] of an `f32` tensor on the CPU device.
+    fn kernel_resize_bilinear(
+        x: FloatTensor<Self>,
+        size: [usize; 2],
+        align_corners: bool,
+    ) -> FloatTensor<Self>;
+}
+
+/// The gradient of [`ResizeKernels::kernel_resize_bilinear`] for an input of `size`.
+pub trait ResizeGradKernels: Backend {
+    fn kernel_resize_bilinear_grad(
+        grad: FloatTensor<Self>,
+        size: [usize; 2],
+        align_corners: bool,
+    ) -> FloatTensor<Self>;
+}
+
+impl ResizeKernels for Flex {
+    fn kernel_resize_bilinear(x: FlexTensor, size: [usize; 2], align_corners: bool) -> FlexTensor {
+        let [b, c, h, w] = dims(&x);
+        let out = resize_bilinear_planes(&values(&x), [h, w], size, align_corners);
+        tensor(out, [b, c, size[0], size[1]])
+    }
+}
+
+impl ResizeGradKernels for Flex {
+    fn kernel_resize_bilinear_grad(
+        grad: FlexTensor,
+        size: [usize; 2],
+        align_corners: bool,
+    ) -> FlexTensor {
+        let [b, c, oh, ow] = dims(&grad);
+        let dx = resize_bilinear_planes_grad(&values(&grad), [oh, ow], size, align_corners);
+        tensor(dx, [b, c, size[0], size[1]])
+    }
+}
+
+/// The backward step of [`ResizeKernels::kernel_resize_bilinear`]; state: the input size and
+/// the convention (the operation is linear: no tensor is kept).
+#[derive(Debug)]
+struct ResizeBackward;
+
+impl<B: ResizeGradKernels> Backward<B, 1> for ResizeBackward {
+    type State = ([usize; 2], bool);
+
+    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let grad = grads.consume::<B>(&ops.node);
+        let (size, align_corners) = ops.state;
+        if let Some(node) = &ops.parents[0] {
+            let dx = B::kernel_resize_bilinear_grad(grad, size, align_corners);
+            grads.register::<B>(node.id, dx);
+        }
+    }
+}
+
+impl<B, C> ResizeKernels for Autodiff<B, C>
+where
+    B: ResizeKernels + ResizeGradKernels,
+    C: CheckpointStrategy,
+{
+    fn kernel_resize_bilinear(
+        x: FloatTensor<Self>,
+        size: [usize; 2],
+        align_corners: bool,
+    ) -> FloatTensor<Self> {
+        let shape = x.primitive().shape();
+        let input_size = [shape[2], shape[3]];
+        match ResizeBackward
+            .prepare::<C>([x.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let out = B::kernel_resize_bilinear(x.into_primitive(), size, align_corners);
+                prep.finish((input_size, align_corners), out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::kernel_resize_bilinear(
+                x.into_primitive(),
+                size,
+                align_corners,
+            )),
+        }
+    }
 }
 
 /// Resizes dimension `dim` (2 or 3) of `x` to `len` samples.

@@ -1,6 +1,7 @@
 //! `nn::resize`: the select-based bilinear resize (the path taken inside autodiff graphs, which
-//! the GPU backends can differentiate) against burn's `interpolate` kernel, forward and backward,
-//! both PyTorch conventions, up and down.
+//! the GPU backends can differentiate) and the CPU kernels (inference, and training with their
+//! adjoint) against burn's `interpolate` kernel, forward and backward, both PyTorch conventions,
+//! up and down.
 
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
@@ -69,23 +70,19 @@ fn cpu_inference_kernel_matches_the_kernel() {
     matches_the_kernel(resize_bilinear);
 }
 
-#[test]
-fn gradients_match_the_kernel() {
+/// The input gradient of `resize` under autodiff on the CPU against burn's kernel's.
+fn gradients_match_the_kernel(resize: fn(Tensor<4>, [usize; 2], bool) -> Tensor<4>) {
     let device = Device::flex().autodiff();
     for (from, to) in CASES {
         for align_corners in [true, false] {
             let upstream = input(to[0], to[1], &device);
-            let grad = |separable: bool| {
+            let grad = |resize: fn(Tensor<4>, [usize; 2], bool) -> Tensor<4>| {
                 let x = input(from[0], from[1], &device).require_grad();
-                let y = if separable {
-                    resize_bilinear_separable(x.clone(), to, align_corners)
-                } else {
-                    native(x.clone(), to, align_corners)
-                };
+                let y = resize(x.clone(), to, align_corners);
                 let grads = (y * upstream.clone()).sum().backward();
                 x.grad(&grads).expect("input gradient")
             };
-            let (ours, kernel) = (grad(true), grad(false));
+            let (ours, kernel) = (grad(resize), grad(native));
             let d: f32 = (ours - kernel).abs().max().into_scalar();
             assert!(
                 d < 1e-4,
@@ -93,6 +90,23 @@ fn gradients_match_the_kernel() {
             );
         }
     }
+}
+
+#[test]
+fn separable_gradients_match_the_kernel() {
+    gradients_match_the_kernel(resize_bilinear_separable);
+}
+
+/// The CPU training path: the plain-buffer kernel as a burn operation with its adjoint.
+#[test]
+fn cpu_training_gradients_match_the_kernel() {
+    gradients_match_the_kernel(resize_bilinear);
+    let x = input(5, 7, &Device::flex().autodiff());
+    let d = max_abs_diff(
+        resize_bilinear(x.clone(), [11, 13], false),
+        native(x, [11, 13], false),
+    );
+    assert!(d < 2e-5, "forward: {d}");
 }
 
 #[test]
