@@ -51,6 +51,7 @@ pub mod infer;
 pub mod interp;
 mod matmul;
 pub mod monster;
+pub mod photometric;
 pub mod pool;
 pub mod profile;
 pub mod resize;

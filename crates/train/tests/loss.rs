@@ -647,3 +647,59 @@ fn separable_ssim_equals_the_two_dimensional_box() {
     assert!(worst < 1e-4, "{worst}");
     assert!(want.iter().any(|v| *v > 0.01), "the images differ");
 }
+
+/// The fused photometric map (`nn::photometric`, what the loss runs on the CPU) equals its
+/// tensor composition from `ssim_loss_map` and the L1 term, values and the gradient of the
+/// reconstruction: batch 2, three channels, windows 3 and 7, and a black patch in both images
+/// where the SSIM denominator is clamped.
+#[test]
+fn fused_photometric_map_matches_the_composition() {
+    use burn::tensor::Distribution;
+    use nn::photometric::{photometric_map, Photometric};
+    use train::loss::terms::ssim_loss_map;
+    let device = Device::flex().autodiff();
+    let dims = [2, 3, 13, 17];
+    let black = |t: Tensor<4>| t.slice_fill([0..2, 0..3, 2..7, 3..9], 0.0);
+    let x = black(Tensor::<4>::random(
+        dims,
+        Distribution::Uniform(0.0, 1.0),
+        &device,
+    ));
+    let y = black(Tensor::<4>::random(
+        dims,
+        Distribution::Uniform(0.0, 1.0),
+        &device,
+    ));
+    let upstream = Tensor::<4>::random([2, 1, 13, 17], Distribution::Normal(0.0, 1.0), &device);
+    for window in [3, 7] {
+        let alpha = 0.85;
+        let run = |fused: bool| {
+            let y = y.clone().require_grad();
+            let map = if fused {
+                let options = Photometric { alpha, window };
+                photometric_map(x.clone(), y.clone(), options).expect("the CPU kernel applies")
+            } else {
+                let l1 = (x.clone() - y.clone()).abs().mean_dim(1);
+                ssim_loss_map(x.clone(), y.clone(), window)
+                    .mul_scalar(alpha)
+                    .add(l1.mul_scalar(1.0 - alpha))
+            };
+            let grads = (map.clone() * upstream.clone()).sum().backward();
+            let dy = y.grad(&grads).expect("reconstruction gradient");
+            let values = |t: Tensor<4>| t.into_data().try_into_vec::<f32>().unwrap();
+            (values(map.inner()), values(dy))
+        };
+        let (ours, reference) = (run(true), run(false));
+        for (what, a, b) in [
+            ("map", &ours.0, &reference.0),
+            ("∂y", &ours.1, &reference.1),
+        ] {
+            let scale = b.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
+            let worst = a.iter().zip(b).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+            assert!(
+                worst <= 1e-4 * scale.max(1.0),
+                "window {window} {what}: {worst} (scale {scale})"
+            );
+        }
+    }
+}

@@ -7,6 +7,7 @@
 
 use burn::tensor::ops::{GridSampleOptions, GridSamplePaddingMode, InterpolateMode};
 use burn::tensor::{Bool, Tensor};
+use nn::photometric::{photometric_map, Photometric};
 use nn::pool::avg_pool2d_box;
 
 use super::config::DisparityPenalty;
@@ -83,7 +84,8 @@ pub fn ssim_loss_map(x: Tensor<4>, y: Tensor<4>, window: usize) -> Tensor<4> {
 }
 
 /// Per-pixel photometric error `α(1 − SSIM)/2 + (1 − α)|·|` (channel means, `[B, 1, H, W]`)
-/// between the real left image and the real right image warped by `disparity`.
+/// between the real left image (data: no gradient flows to it) and the real right image warped
+/// by `disparity`; one fused operation on the CPU device ([`nn::photometric`]).
 pub fn photometric_error_map(
     real_left: Tensor<4>,
     real_right: Tensor<4>,
@@ -92,6 +94,14 @@ pub fn photometric_error_map(
     ssim_window: usize,
 ) -> Tensor<4> {
     let reconstruction = warp_right_to_left(real_right, disparity);
+    let options = Photometric {
+        alpha,
+        window: ssim_window,
+    };
+    if let Some(map) = photometric_map(real_left.clone(), reconstruction.clone(), options) {
+        return map;
+    }
+    let real_left = real_left.detach();
     let l1 = (real_left.clone() - reconstruction.clone())
         .abs()
         .mean_dim(1);
