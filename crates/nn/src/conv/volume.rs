@@ -32,6 +32,10 @@ use crate::matmul::{gemm_f32, Strided};
 /// keeping each product long.
 const BAND_FLOATS: usize = 1 << 22;
 
+/// Fewest pixels per weight-gradient GEMM: shorter pieces spend more on partial sums than they
+/// gain in balance.
+const MIN_PIECE_PIXELS: usize = 256;
+
 /// The shape of a one-group 3-D convolution (the same padding before and after each axis).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Geometry3 {
@@ -374,40 +378,66 @@ pub fn conv3d_weight_grad(
     ];
     for n in 0..b {
         let x = &x[n * ci * volume..][..ci * volume];
+        let grad = &grad[n * co * positions..][..co * positions];
         for planes in bands(out, per_band) {
             let band = planes.len() * plane;
-            let unfolded = if geometry.is_pointwise() {
-                Strided::columns(x[planes.start * plane..].as_ptr(), positions)
+            let first = planes.start * plane;
+            let (unfolded, stride) = if geometry.is_pointwise() {
+                (&x[first..], positions)
             } else {
-                unfold_band(
-                    x,
-                    size,
-                    geometry,
-                    out,
-                    planes.clone(),
-                    &mut cols[..k * band],
-                );
-                Strided::columns(cols.as_ptr(), band)
+                let cols = &mut cols[..k * band];
+                unfold_band(x, size, geometry, out, planes, cols);
+                (&*cols, band)
             };
-            // SAFETY: `dw` is `co × k`; the gradient view `co × band` values of this item; the
-            // unfolded input read transposed `band × k`.
-            unsafe {
-                gemm_f32(
-                    [co, k, band],
-                    Strided::rows(dw.as_mut_ptr(), k),
-                    Strided::rows(
-                        grad[(n * co * positions + planes.start * plane)..].as_ptr(),
-                        positions,
-                    ),
-                    unfolded,
-                    true,
-                    1.0,
-                    gemm::Parallelism::Rayon(0),
-                );
-            }
+            let rows = [&grad[first..], unfolded];
+            accumulate_weight_grad(&mut dw, rows, [positions, stride], [co, k, band]);
         }
     }
     dw
+}
+
+/// `dw += ȳ · uᵀ` (`[co, k]`) over `pixels` columns of `ȳ` (`co` rows) and of the unfolded
+/// input `u` (`k` rows), each row-major with the given row strides. The product is too small for
+/// the GEMM to share among threads, so pieces of the pixels run as independent single-threaded
+/// GEMMs into partial sums.
+fn accumulate_weight_grad(
+    dw: &mut [f32],
+    [grad, unfolded]: [&[f32]; 2],
+    [grad_stride, unfolded_stride]: [usize; 2],
+    [co, k, pixels]: [usize; 3],
+) {
+    let pieces = (2 * rayon::current_num_threads())
+        .min(pixels.div_ceil(MIN_PIECE_PIXELS))
+        .max(1);
+    let piece = pixels.div_ceil(pieces);
+    let sum = (0..pieces)
+        .into_par_iter()
+        .map(|i| {
+            let mut part = vec![0.0f32; co * k];
+            let columns = i * piece..((i + 1) * piece).min(pixels);
+            // SAFETY: `part` is `co × k`; ȳ's view `co × len` values `grad_stride` apart per
+            // row; `u` read transposed is `len × k`, rows `unfolded_stride` apart; both inside
+            // their slices (the callers pass `co`/`k` rows of at least `pixels` columns).
+            unsafe {
+                gemm_f32(
+                    [co, k, columns.len()],
+                    Strided::rows(part.as_mut_ptr(), k),
+                    Strided::rows(grad[columns.start..].as_ptr(), grad_stride),
+                    Strided::columns(unfolded[columns.start..].as_ptr(), unfolded_stride),
+                    false,
+                    1.0,
+                    gemm::Parallelism::None,
+                );
+            }
+            part
+        })
+        .reduce_with(|mut a, b| {
+            a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+            a
+        });
+    if let Some(sum) = sum {
+        dw.iter_mut().zip(&sum).for_each(|(d, s)| *d += s);
+    }
 }
 
 /// `conv.forward(x)` on the kernels where they apply (the CPU device, one group, no bias,
