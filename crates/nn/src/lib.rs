@@ -39,6 +39,7 @@
 
 pub mod activation;
 pub mod attention;
+pub mod batch_norm;
 pub mod bench;
 pub mod config;
 pub mod conv;

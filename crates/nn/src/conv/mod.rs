@@ -23,10 +23,9 @@ use std::sync::Arc;
 
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::nn::{BatchNorm, PaddingConfig2d};
-use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::activation::leaky_relu;
+use crate::activation::{leaky_relu, relu};
 
 pub use kernels::{
     conv2d_nchw, conv_transpose2d_nchw, Activation, Epilogue, Geometry, Nchw, TransposeGeometry,

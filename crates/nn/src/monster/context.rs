@@ -11,10 +11,9 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
-use crate::activation::tanh;
+use crate::activation::{relu, tanh};
 use crate::conv::conv2d_forward;
 
 use super::features::conv2d;

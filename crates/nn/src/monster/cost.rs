@@ -24,6 +24,7 @@ use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
 use crate::activation::{leaky_relu, sigmoid};
+use crate::batch_norm::batch_norm;
 use crate::conv::{
     conv2d_forward, conv2d_fused, conv3d_forward, conv_transpose2d_forward,
     conv_transpose3d_forward, Activation,
@@ -154,7 +155,10 @@ impl BasicConv3d {
     }
 
     pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {
-        leaky_relu(self.bn.forward(conv3d_forward(&self.conv, x)), LEAKY_SLOPE)
+        leaky_relu(
+            batch_norm(&self.bn, conv3d_forward(&self.conv, x)),
+            LEAKY_SLOPE,
+        )
     }
 }
 
@@ -186,7 +190,7 @@ impl BasicDeconv3d {
     pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {
         let y = conv_transpose3d_forward(&self.conv, x);
         if self.bn_relu {
-            leaky_relu(self.bn.forward(y), LEAKY_SLOPE)
+            leaky_relu(batch_norm(&self.bn, y), LEAKY_SLOPE)
         } else {
             y
         }

@@ -8,11 +8,11 @@
 use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, PaddingConfig2d};
-use burn::tensor::activation::relu;
 use burn::tensor::module::{conv2d, conv_transpose2d};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Tensor};
 
+use crate::activation::relu;
 use crate::config::DptConfig;
 use crate::conv::{
     conv2d_forward, conv2d_fused, conv2d_with, conv_transpose2d_with, on_cpu_inference, Activation,

@@ -14,10 +14,9 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::PaddingConfig2d;
-use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
-use crate::activation::leaky_relu;
+use crate::activation::{leaky_relu, relu};
 use crate::conv::{conv2d_forward, conv_transpose2d_forward};
 
 /// Slope of PyTorch's default `nn.LeakyReLU()`, used by `BasicConv`/`BasicConv_IN`.

@@ -36,7 +36,7 @@
 
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv3d, ConvTranspose2d};
-use burn::tensor::activation::{relu, softmax, tanh};
+use burn::tensor::activation::{softmax, tanh};
 use burn::tensor::{Device, Tensor};
 
 use super::context::FeatTransferCnet;
@@ -59,6 +59,7 @@ use super::vit::{normalize_image, DinoVisionTransformer};
 
 /// Profile group of the stereo feature stems and the GRU context.
 const STEMS: &str = "feature stems + context";
+use crate::activation::relu;
 use crate::config::MonsterConfig;
 use crate::conv::{conv2d_forward, conv_transpose2d_forward, with_prepared_weights};
 use crate::profile::span;

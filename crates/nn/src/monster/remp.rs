@@ -8,11 +8,10 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d, Relu};
-use burn::tensor::activation::relu;
 use burn::tensor::module::adaptive_avg_pool2d;
 use burn::tensor::{Device, Tensor};
 
-use crate::activation::{leaky_relu, sigmoid};
+use crate::activation::{leaky_relu, relu, sigmoid};
 use crate::conv::{conv2d_forward, conv2d_fused, conv_transpose2d_fused, Activation};
 
 use super::warp::disp_warp;
