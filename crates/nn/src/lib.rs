@@ -47,6 +47,7 @@ pub mod device;
 pub mod dinov3;
 pub mod fastmath;
 mod flex_tensor;
+pub mod gate;
 pub mod grid_sample;
 pub mod infer;
 pub mod interp;

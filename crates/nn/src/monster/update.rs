@@ -19,6 +19,7 @@ use crate::conv::{
     Activation, Epilogue, Geometry, LayerWeights, Nchw,
 };
 use crate::fastmath;
+use crate::gate::gru_blend;
 use crate::pool::avg_pool2d_padded;
 use crate::resize::resize_bilinear;
 
@@ -73,7 +74,7 @@ impl ConvGru {
         let q = tanh(
             conv2d_forward(&self.convq, Tensor::cat(vec![r * h.clone(), x], 1)) + ctx[2].clone(),
         );
-        (z.clone().neg().add_scalar(1.0)) * h + z * q
+        gru_blend(h, z, q)
     }
 
     /// The convolutions' shared geometry where [`forward_fused`](Self::forward_fused) applies:
