@@ -240,25 +240,9 @@ mod tests {
     use burn::nn::BatchNormConfig;
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::{assert_close, position_weights};
 
     use super::*;
-
-    fn close<const D: usize>(what: &str, ours: Tensor<D>, burn: Tensor<D>) {
-        let (ours, burn) = (
-            ours.into_data().try_to_vec::<f32>().unwrap(),
-            burn.into_data().try_to_vec::<f32>().unwrap(),
-        );
-        let scale = burn.iter().fold(1.0f32, |m, v| m.max(v.abs()));
-        let worst = ours
-            .iter()
-            .zip(&burn)
-            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
-        assert!(
-            worst <= 1e-4 * scale,
-            "{what}: max difference {worst} (scale {scale})"
-        );
-    }
 
     /// Output, running statistics and the gradients of the input, γ and β equal burn's
     /// training BatchNorm on a batch-2 volume, after two steps (the running statistics blend).
@@ -294,16 +278,16 @@ mod tests {
         };
         let ours = run(&ours_bn, true);
         let theirs = run(&burn_bn, false);
-        close("output", ours.0, theirs.0);
-        close("∂x", ours.1, theirs.1);
-        close("∂γ", ours.2, theirs.2);
-        close("∂β", ours.3, theirs.3);
-        close(
+        assert_close("output", ours.0, theirs.0);
+        assert_close("∂x", ours.1, theirs.1);
+        assert_close("∂γ", ours.2, theirs.2);
+        assert_close("∂β", ours.3, theirs.3);
+        assert_close(
             "running mean",
             ours_bn.running_mean.value(),
             burn_bn.running_mean.value(),
         );
-        close(
+        assert_close(
             "running var",
             ours_bn.running_var.value(),
             burn_bn.running_var.value(),

@@ -509,27 +509,12 @@ mod tests {
     use burn::tensor::module::{conv2d as burn_conv2d, conv_transpose2d as burn_conv_transpose2d};
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::{assert_close, position_weights};
 
     use super::*;
 
     fn random<const D: usize>(dims: [usize; D], device: &Device) -> Tensor<D> {
         Tensor::random(dims, Distribution::Normal(0.0, 1.0), device)
-    }
-
-    fn close<const D: usize>(what: &str, ours: Tensor<D>, burn: Tensor<D>) {
-        assert_eq!(ours.dims(), burn.dims(), "{what}: shape");
-        let ours = ours.into_data().try_to_vec::<f32>().unwrap();
-        let burn = burn.into_data().try_to_vec::<f32>().unwrap();
-        let scale = burn.iter().fold(1.0f32, |m, v| m.max(v.abs()));
-        let worst = ours
-            .iter()
-            .zip(&burn)
-            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
-        assert!(
-            worst <= 1e-4 * scale,
-            "{what}: max difference {worst} (scale {scale})"
-        );
     }
 
     /// Forward values and the gradients of `x`, the weight and the bias equal burn's
@@ -590,11 +575,11 @@ mod tests {
             };
             let (ours, theirs) = (run(true), run(false));
             let what = format!("{dims:?} k{kh}×{kw} s{stride} d{dilation} p{padding:?}");
-            close(&format!("{what} output"), ours.0, theirs.0);
-            close(&format!("{what} ∂x"), ours.1, theirs.1);
-            close(&format!("{what} ∂w"), ours.2, theirs.2);
+            assert_close(&format!("{what} output"), ours.0, theirs.0);
+            assert_close(&format!("{what} ∂x"), ours.1, theirs.1);
+            assert_close(&format!("{what} ∂w"), ours.2, theirs.2);
             if let (Some(a), Some(b)) = (ours.3, theirs.3) {
-                close(&format!("{what} ∂b"), a, b);
+                assert_close(&format!("{what} ∂b"), a, b);
             }
         }
     }
@@ -652,11 +637,11 @@ mod tests {
             };
             let (ours, theirs) = (run(true), run(false));
             let what = format!("{dims:?} k{k} s{stride} p{padding} o{padding_out} d{dilation}");
-            close(&format!("{what} output"), ours.0, theirs.0);
-            close(&format!("{what} ∂x"), ours.1, theirs.1);
-            close(&format!("{what} ∂w"), ours.2, theirs.2);
+            assert_close(&format!("{what} output"), ours.0, theirs.0);
+            assert_close(&format!("{what} ∂x"), ours.1, theirs.1);
+            assert_close(&format!("{what} ∂w"), ours.2, theirs.2);
             if let (Some(a), Some(b)) = (ours.3, theirs.3) {
-                close(&format!("{what} ∂b"), a, b);
+                assert_close(&format!("{what} ∂b"), a, b);
             }
         }
     }

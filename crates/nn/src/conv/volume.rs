@@ -692,24 +692,9 @@ mod tests {
     use burn::nn::conv::{Conv3dConfig, ConvTranspose3dConfig};
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::{assert_close, position_weights};
 
     use super::*;
-
-    fn close<const D: usize>(what: &str, ours: Tensor<D>, burn: Tensor<D>) {
-        assert_eq!(ours.dims(), burn.dims(), "{what}: shape");
-        let ours = ours.into_data().try_to_vec::<f32>().unwrap();
-        let burn = burn.into_data().try_to_vec::<f32>().unwrap();
-        let scale = burn.iter().fold(1.0f32, |m, v| m.max(v.abs()));
-        let worst = ours
-            .iter()
-            .zip(&burn)
-            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
-        assert!(
-            worst <= 1e-4 * scale,
-            "{what}: max difference {worst} (scale {scale})"
-        );
-    }
 
     /// Runs `forward` with ours or burn's layer under autodiff; the output and the gradients of
     /// the input and the weight.
@@ -760,7 +745,7 @@ mod tests {
                 .iter()
                 .zip(ours.into_iter().zip(burn))
             {
-                close(&format!("{what} {name}"), a, b);
+                assert_close(&format!("{what} {name}"), a, b);
             }
         }
         // (x dims, co, kernel, stride, padding, padding_out)
@@ -785,7 +770,7 @@ mod tests {
                 .iter()
                 .zip(ours.into_iter().zip(burn))
             {
-                close(&format!("{what} {name}"), a, b);
+                assert_close(&format!("{what} {name}"), a, b);
             }
         }
     }
