@@ -237,6 +237,43 @@ fn bands(out: [usize; 3], per_band: usize) -> impl Iterator<Item = Range<usize>>
         .map(move |z| z..(z + per_band).min(out[0]))
 }
 
+/// Calls `each(n, planes, unfolded, row_stride)` for every batch item `n` of `x` (`shape`) and
+/// band of output depth planes: `unfolded` holds the band's `ci·taps` rows of the unfolded input,
+/// `row_stride` apart (for a 1×1×1 convolution the input itself from the band's first pixel, rows
+/// a whole volume apart, unfolded into nothing).
+fn for_each_unfolded_band(
+    x: &[f32],
+    shape: Ncdhw,
+    geometry: &Geometry3,
+    mut each: impl FnMut(usize, Range<usize>, &[f32], usize),
+) {
+    let [b, ci, d, h, w] = shape;
+    let size = [d, h, w];
+    let out = geometry.output(size);
+    let (volume, plane) = (d * h * w, out[1] * out[2]);
+    let k = ci * geometry.taps();
+    let per_band = band_planes(k, out);
+    let scratch = if geometry.is_pointwise() {
+        0
+    } else {
+        k * per_band * plane
+    };
+    let mut cols = vec![0.0f32; scratch];
+    for n in 0..b {
+        let x = &x[n * ci * volume..][..ci * volume];
+        for planes in bands(out, per_band) {
+            if geometry.is_pointwise() {
+                each(n, planes.clone(), &x[planes.start * plane..], volume);
+            } else {
+                let band = planes.len() * plane;
+                let cols = &mut cols[..k * band];
+                unfold_band(x, size, geometry, out, planes.clone(), cols);
+                each(n, planes, cols, band);
+            }
+        }
+    }
+}
+
 /// `conv3d(x, weight)` of `x` (`shape`) with `weight` `[co, ci, kd, kh, kw]`: `[b, co, od, oh, ow]`
 /// and the output size.
 pub fn conv3d_ncdhw(
@@ -247,55 +284,28 @@ pub fn conv3d_ncdhw(
     geometry: &Geometry3,
 ) -> (Vec<f32>, [usize; 3]) {
     let [b, ci, d, h, w] = shape;
-    let size = [d, h, w];
-    let out = geometry.output(size);
-    let (volume, positions) = (d * h * w, out.iter().product::<usize>());
-    let plane = out[1] * out[2];
+    let out = geometry.output([d, h, w]);
+    let (positions, plane) = (out.iter().product::<usize>(), out[1] * out[2]);
     let k = ci * geometry.taps();
     assert_eq!(weight.len(), co * k, "conv3d: weight size");
     let mut y = vec![0.0f32; b * co * positions];
-    let per_band = band_planes(k, out);
-    let mut cols = vec![
-        0.0f32;
-        if geometry.is_pointwise() {
-            0
-        } else {
-            k * per_band * plane
+    for_each_unfolded_band(x, shape, geometry, |n, planes, unfolded, stride| {
+        let band = planes.len() * plane;
+        let dst = &mut y[(n * co * positions + planes.start * plane)..];
+        // SAFETY: the views address `co × band` outputs of this item (rows `positions` apart),
+        // the `co × k` weight and the `k × band` unfolded input (rows `stride` apart).
+        unsafe {
+            gemm_f32(
+                [co, band, k],
+                Strided::rows(dst.as_mut_ptr(), positions),
+                Strided::rows(weight.as_ptr(), k),
+                Strided::rows(unfolded.as_ptr(), stride),
+                false,
+                1.0,
+                gemm::Parallelism::Rayon(0),
+            );
         }
-    ];
-    for n in 0..b {
-        let x = &x[n * ci * volume..][..ci * volume];
-        for planes in bands(out, per_band) {
-            let band = planes.len() * plane;
-            let rhs = if geometry.is_pointwise() {
-                Strided::rows(x[planes.start * plane..].as_ptr(), positions)
-            } else {
-                unfold_band(
-                    x,
-                    size,
-                    geometry,
-                    out,
-                    planes.clone(),
-                    &mut cols[..k * band],
-                );
-                Strided::rows(cols.as_ptr(), band)
-            };
-            let dst = &mut y[(n * co * positions + planes.start * plane)..];
-            // SAFETY: the views address `co × band` outputs of this item (rows `positions`
-            // apart), the `co × k` weight and the `k × band` unfolded input or input.
-            unsafe {
-                gemm_f32(
-                    [co, band, k],
-                    Strided::rows(dst.as_mut_ptr(), positions),
-                    Strided::rows(weight.as_ptr(), k),
-                    rhs,
-                    false,
-                    1.0,
-                    gemm::Parallelism::Rayon(0),
-                );
-            }
-        }
-    }
+    });
     (y, out)
 }
 
@@ -315,23 +325,30 @@ pub fn conv3d_input_grad(
     assert_eq!(weight.len(), co * k, "conv3d_input_grad: weight size");
     assert_eq!(geometry.output(size), out, "conv3d_input_grad: output size");
     let mut dx = vec![0.0f32; b * ci * volume];
-    let per_band = if geometry.is_pointwise() {
-        od
+    let per_band = band_planes(k, out);
+    // A 1×1×1 convolution's unfolded gradient is the input gradient: the GEMM writes it in place.
+    let scratch = if geometry.is_pointwise() {
+        0
     } else {
-        band_planes(k, out)
+        k * per_band * plane
     };
-    let mut cols = vec![0.0f32; k * per_band * plane];
+    let mut cols = vec![0.0f32; scratch];
     for n in 0..b {
         let dx = &mut dx[n * ci * volume..][..ci * volume];
         for planes in bands(out, per_band) {
             let band = planes.len() * plane;
-            let cols = &mut cols[..k * band];
-            // SAFETY: `cols` is `k × band`; the weight read transposed is `k × co`; the gradient
-            // view addresses `co × band` values of this item.
+            let (dst, stride) = if geometry.is_pointwise() {
+                (&mut dx[planes.start * plane..], volume)
+            } else {
+                (&mut cols[..k * band], band)
+            };
+            // SAFETY: `dst` is `k × band`, rows `stride` apart, inside its slice; the weight
+            // read transposed is `k × co`; the gradient view addresses `co × band` values of
+            // this item.
             unsafe {
                 gemm_f32(
                     [k, band, co],
-                    Strided::rows(cols.as_mut_ptr(), band),
+                    Strided::rows(dst.as_mut_ptr(), stride),
                     Strided::columns(weight.as_ptr(), k),
                     Strided::rows(
                         grad[(n * co * positions + planes.start * plane)..].as_ptr(),
@@ -342,10 +359,8 @@ pub fn conv3d_input_grad(
                     gemm::Parallelism::Rayon(0),
                 );
             }
-            if geometry.is_pointwise() {
-                dx.copy_from_slice(cols);
-            } else {
-                fold_band(cols, size, geometry, out, planes, dx);
+            if !geometry.is_pointwise() {
+                fold_band(&cols[..k * band], size, geometry, out, planes, dx);
             }
         }
     }
@@ -361,38 +376,21 @@ pub fn conv3d_weight_grad(
     co: usize,
     geometry: &Geometry3,
 ) -> Vec<f32> {
-    let [b, ci, d, h, w] = shape;
-    let size = [d, h, w];
-    let out = geometry.output(size);
-    let (volume, positions, plane) = (d * h * w, out.iter().product::<usize>(), out[1] * out[2]);
+    let [_, ci, d, h, w] = shape;
+    let out = geometry.output([d, h, w]);
+    let (positions, plane) = (out.iter().product::<usize>(), out[1] * out[2]);
     let k = ci * geometry.taps();
     let mut dw = vec![0.0f32; co * k];
-    let per_band = band_planes(k, out);
-    let mut cols = vec![
-        0.0f32;
-        if geometry.is_pointwise() {
-            0
-        } else {
-            k * per_band * plane
-        }
-    ];
-    for n in 0..b {
-        let x = &x[n * ci * volume..][..ci * volume];
-        let grad = &grad[n * co * positions..][..co * positions];
-        for planes in bands(out, per_band) {
-            let band = planes.len() * plane;
-            let first = planes.start * plane;
-            let (unfolded, stride) = if geometry.is_pointwise() {
-                (&x[first..], positions)
-            } else {
-                let cols = &mut cols[..k * band];
-                unfold_band(x, size, geometry, out, planes, cols);
-                (&*cols, band)
-            };
-            let rows = [&grad[first..], unfolded];
-            accumulate_weight_grad(&mut dw, rows, [positions, stride], [co, k, band]);
-        }
-    }
+    for_each_unfolded_band(x, shape, geometry, |n, planes, unfolded, stride| {
+        let band = planes.len() * plane;
+        let grad = &grad[n * co * positions + planes.start * plane..];
+        accumulate_weight_grad(
+            &mut dw,
+            [grad, unfolded],
+            [positions, stride],
+            [co, k, band],
+        );
+    });
     dw
 }
 
