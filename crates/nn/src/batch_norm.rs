@@ -1,6 +1,6 @@
-//! BatchNorm in training (batch statistics) as one burn operation on the CPU device: the forward
-//! is one pass for the statistics and one for the output, the backward two passes, channels in
-//! parallel.
+//! BatchNorm in training (batch statistics) as one burn operation on the CPU device: the
+//! statistics in one pass (shared by the running statistics, the output and the backward), the
+//! output in another, the backward two passes, channels in parallel.
 //!
 //! Why: burn builds the training BatchNorm from about ten tensor operations (a transposed copy,
 //! reductions, broadcasts) and its backward from twenty, each a single-threaded pass over the
@@ -30,25 +30,34 @@ pub fn batch_norm<const D: usize>(bn: &BatchNorm, x: Tensor<D>) -> Tensor<D> {
     }
     let device = x.device();
     let dims = x.dims();
+    // The batch's statistics, computed once: for the running statistics, the normalisation and
+    // its backward.
     let (mean, variance) = channel_statistics(&f32_vec(x.clone().inner()), dims[0], dims[1]);
     let channels = dims[1];
-    let stats = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [channels]), &device);
+    let statistics = Tensor::<2>::from_data(
+        TensorData::new([mean, variance].concat(), [2, channels]),
+        &device,
+    );
     let momentum = bn.momentum;
-    let blend = |running: Tensor<1>, batch: Vec<f32>| {
+    let blend = |running: Tensor<1>, row: usize| {
+        let batch = statistics
+            .clone()
+            .slice([row..row + 1, 0..channels])
+            .reshape([channels]);
         running
             .to_device(&device)
             .mul_scalar(1.0 - momentum)
-            .add(stats(batch).mul_scalar(momentum))
+            .add(batch.mul_scalar(momentum))
             .detach()
     };
     bn.running_mean
-        .update(blend(bn.running_mean.value_sync(), mean));
-    bn.running_var
-        .update(blend(bn.running_var.value_sync(), variance));
+        .update(blend(bn.running_mean.value_sync(), 0));
+    bn.running_var.update(blend(bn.running_var.value_sync(), 1));
     Tensor::from_dispatch(<Dispatch as BatchNormKernels>::kernel_batch_norm_train(
         x.into_dispatch(),
         bn.gamma.val().into_dispatch(),
         bn.beta.val().into_dispatch(),
+        statistics.into_dispatch(),
         bn.epsilon as f32,
     ))
 }
@@ -74,11 +83,13 @@ fn channel_statistics(x: &[f32], b: usize, c: usize) -> (Vec<f32>, Vec<f32>) {
 
 #[backend_extension(Flex, Autodiff)]
 pub trait BatchNormKernels: Backend {
-    /// `γ·(x − μ)/√(σ² + ε) + β` with the batch's per-channel `μ` and biased `σ²`.
+    /// `γ·(x − μ)/√(σ² + ε) + β` with the batch's per-channel `μ` and biased `σ²`, given as the
+    /// rows of `statistics` (`[2, c]`, constants: the gradient through them is in the backward).
     fn kernel_batch_norm_train(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         beta: FloatTensor<Self>,
+        statistics: FloatTensor<Self>,
         epsilon: f32,
     ) -> FloatTensor<Self>;
 }
@@ -88,6 +99,7 @@ pub trait BatchNormGradKernels: Backend {
     fn kernel_batch_norm_train_grad(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
+        statistics: FloatTensor<Self>,
         grad: FloatTensor<Self>,
         epsilon: f32,
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>);
@@ -105,12 +117,14 @@ impl BatchNormKernels for Flex {
         x: FlexTensor,
         gamma: FlexTensor,
         beta: FlexTensor,
+        statistics: FlexTensor,
         epsilon: f32,
     ) -> FlexTensor {
         let shape = x.shape();
-        let [b, c, n] = layout(&x);
+        let [_, c, n] = layout(&x);
         let (x, gamma, beta) = (values(&x), values(&gamma), values(&beta));
-        let (mean, var) = channel_statistics(&x, b, c);
+        let statistics = values(&statistics);
+        let (mean, var) = statistics.split_at(c);
         let mut out = vec![0.0f32; x.len()];
         out.par_chunks_exact_mut(n)
             .zip(x.par_chunks_exact(n))
@@ -131,13 +145,15 @@ impl BatchNormGradKernels for Flex {
     fn kernel_batch_norm_train_grad(
         x: FlexTensor,
         gamma: FlexTensor,
+        statistics: FlexTensor,
         grad: FlexTensor,
         epsilon: f32,
     ) -> (FlexTensor, FlexTensor, FlexTensor) {
         let shape = x.shape();
         let [b, c, n] = layout(&x);
         let (x, gamma, grad) = (values(&x), values(&gamma), values(&grad));
-        let (mean, var) = channel_statistics(&x, b, c);
+        let statistics = values(&statistics);
+        let (mean, var) = statistics.split_at(c);
         let count = (b * n) as f32;
         let plane = |i: usize, ch: usize| (i * c + ch) * n..(i * c + ch + 1) * n;
         // Per channel: ∂β = Σ ḡ, ∂γ = Σ ḡ·x̂.
@@ -180,17 +196,18 @@ impl BatchNormGradKernels for Flex {
 }
 
 /// The backward step of [`BatchNormKernels::kernel_batch_norm_train`]: parents
-/// `[x, gamma, beta]`; state: `x`, `gamma` and `ε`.
+/// `[x, gamma, beta]`; state: `x`, `gamma`, the statistics and `ε`.
 #[derive(Debug)]
 struct BatchNormBackward;
 
 impl<B: BatchNormGradKernels> Backward<B, 3> for BatchNormBackward {
-    type State = (FloatTensor<B>, FloatTensor<B>, f32);
+    type State = (FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, f32);
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
         let grad = grads.consume::<B>(&ops.node);
-        let (x, gamma, epsilon) = ops.state;
-        let (d_x, d_gamma, d_beta) = B::kernel_batch_norm_train_grad(x, gamma, grad, epsilon);
+        let (x, gamma, statistics, epsilon) = ops.state;
+        let (d_x, d_gamma, d_beta) =
+            B::kernel_batch_norm_train_grad(x, gamma, statistics, grad, epsilon);
         for (parent, d) in ops.parents.iter().zip([d_x, d_gamma, d_beta]) {
             if let Some(node) = parent {
                 grads.register::<B>(node.id, d);
@@ -208,8 +225,10 @@ where
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         beta: FloatTensor<Self>,
+        statistics: FloatTensor<Self>,
         epsilon: f32,
     ) -> FloatTensor<Self> {
+        let statistics = statistics.into_primitive();
         match BatchNormBackward
             .prepare::<C>([x.node(), gamma.node(), beta.node()])
             .compute_bound()
@@ -221,14 +240,16 @@ where
                     x.clone(),
                     gamma.clone(),
                     beta.into_primitive(),
+                    statistics.clone(),
                     epsilon,
                 );
-                prep.finish((x, gamma, epsilon), out)
+                prep.finish((x, gamma, statistics, epsilon), out)
             }
             OpsKind::UnTracked(prep) => prep.finish(B::kernel_batch_norm_train(
                 x.into_primitive(),
                 gamma.into_primitive(),
                 beta.into_primitive(),
+                statistics,
                 epsilon,
             )),
         }
