@@ -73,6 +73,22 @@ impl fmt::Display for DeviceChoice {
     }
 }
 
+/// Runs `pass` (a network's forward, a training step) on a thread of rayon's pool when `device`
+/// is the CPU; elsewhere, or already on a pool thread, right here.
+///
+/// Why: every CPU kernel splits its work over the pool. Called from outside it, each of the
+/// thousands of operations of a pass hands all its pieces over and puts the calling thread to
+/// sleep until they are done (a futex wait and wake every time: a tenth of a training step);
+/// called from a pool thread, the operation runs its first piece right there and the other
+/// threads steal the rest.
+pub fn on_cpu_pool<R: Send>(device: &Device, pass: impl FnOnce() -> R + Send) -> R {
+    if *device == Device::flex() {
+        rayon::scope(|_| pass())
+    } else {
+        pass()
+    }
+}
+
 /// Why a GPU backend named on the command line cannot be used, and how to get it.
 #[allow(dead_code)] // unused when both GPU features are compiled in
 fn not_compiled_in(backend: &str) -> String {
@@ -101,5 +117,13 @@ mod tests {
         assert_eq!("flex".parse::<DeviceChoice>(), Ok(DeviceChoice::Cpu));
         assert!("tpu".parse::<DeviceChoice>().unwrap_err().contains("tpu"));
         assert!(DeviceChoice::Cpu.device().is_ok());
+    }
+
+    #[test]
+    fn cpu_passes_run_on_a_pool_thread() {
+        let cpu = Device::flex();
+        assert!(rayon::current_thread_index().is_none());
+        assert!(on_cpu_pool(&cpu, rayon::current_thread_index).is_some());
+        assert!(on_cpu_pool(&cpu.clone().autodiff(), rayon::current_thread_index).is_some());
     }
 }

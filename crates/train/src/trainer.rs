@@ -181,7 +181,8 @@ impl Session {
         batch: &[PreparedSample],
         lr: f64,
     ) -> Result<(Monster, LossTerms, Option<crate::optim::StepReport>), TrainError> {
-        train_step(self, model, batch, lr)
+        let device = self.device.clone();
+        nn::device::on_cpu_pool(&device, || train_step(self, model, batch, lr))
     }
 }
 

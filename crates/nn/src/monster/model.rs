@@ -62,6 +62,7 @@ const STEMS: &str = "feature stems + context";
 use crate::activation::relu;
 use crate::config::MonsterConfig;
 use crate::conv::{conv2d_forward, conv_transpose2d_forward, with_prepared_weights};
+use crate::device::on_cpu_pool;
 use crate::profile::span;
 use crate::resize::resize_bilinear;
 use crate::weights::{load_submodule, module_keys, LoadReport, WeightsError};
@@ -206,7 +207,9 @@ impl Monster {
         test_mode: bool,
     ) -> MonsterOutput {
         // The iteration loop runs its layers many times: prepare their weights once.
-        with_prepared_weights(|| self.forward_pass(left, right, iters, test_mode))
+        on_cpu_pool(&left.device(), || {
+            with_prepared_weights(|| self.forward_pass(left, right, iters, test_mode))
+        })
     }
 
     fn forward_pass(

@@ -9,6 +9,7 @@ use super::config::SegformerConfig;
 use super::decoder::DecodeHead;
 use super::encoder::Encoder;
 use super::trace::Trace;
+use crate::device::on_cpu_pool;
 use crate::weights::{load_weights_mapped, module_keys, LoadReport, WeightsError};
 
 /// HF `SegformerModel` (only the encoder matters for segmentation).
@@ -48,8 +49,10 @@ impl Segformer {
 
     /// [`Segformer::forward`], recording the intermediates in `trace`.
     pub fn forward_traced(&self, pixel_values: Tensor<4>, trace: &mut Trace) -> Tensor<4> {
-        let stages = self.segformer.encoder.forward(pixel_values, trace);
-        self.decode_head.forward(&stages, trace)
+        on_cpu_pool(&pixel_values.device(), || {
+            let stages = self.segformer.encoder.forward(pixel_values, trace);
+            self.decode_head.forward(&stages, trace)
+        })
     }
 
     /// Loads a checkpoint strictly: the safetensors of HF naming, or the release's `.pt`
