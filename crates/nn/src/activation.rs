@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use crate::conv::on_cpu_training;
 use crate::fastmath;
-use crate::flex_tensor::{tensor, values};
+use crate::flex_tensor::{tensor, updated, values};
 
 /// Elements per parallel task of the element-wise passes.
 const CHUNK: usize = 1 << 14;
@@ -143,41 +143,71 @@ pub trait ActivationGradKernels: Backend {
     ) -> FloatTensor<Self>;
 }
 
+impl Pointwise {
+    /// `out[i] = op(x[i])`: the variant is matched once, outside the loop, so that each loop
+    /// vectorises.
+    fn apply_slice(self, x: &[f32], out: &mut [f32]) {
+        match self {
+            Pointwise::Relu => map_into(x, out, |v| Pointwise::Relu.apply(v)),
+            Pointwise::LeakyRelu(s) => map_into(x, out, |v| Pointwise::LeakyRelu(s).apply(v)),
+            Pointwise::Sigmoid => map_into(x, out, fastmath::sigmoid),
+            Pointwise::Tanh => map_into(x, out, fastmath::tanh),
+        }
+    }
+
+    /// `grad[i] *= op'(y[i])` for the outputs `y`, one loop per variant as
+    /// [`Pointwise::apply_slice`].
+    fn scale_by_derivative(self, y: &[f32], grad: &mut [f32]) {
+        match self {
+            Pointwise::Relu => scale_into(y, grad, |v| Pointwise::Relu.derivative(v)),
+            Pointwise::LeakyRelu(s) => {
+                scale_into(y, grad, |v| Pointwise::LeakyRelu(s).derivative(v))
+            }
+            Pointwise::Sigmoid => scale_into(y, grad, |v| Pointwise::Sigmoid.derivative(v)),
+            Pointwise::Tanh => scale_into(y, grad, |v| Pointwise::Tanh.derivative(v)),
+        }
+    }
+}
+
+#[inline(always)]
+fn map_into(x: &[f32], out: &mut [f32], f: impl Fn(f32) -> f32) {
+    out.iter_mut().zip(x).for_each(|(o, &v)| *o = f(v));
+}
+
+#[inline(always)]
+fn scale_into(y: &[f32], grad: &mut [f32], d: impl Fn(f32) -> f32) {
+    grad.iter_mut().zip(y).for_each(|(g, &y)| *g *= d(y));
+}
+
+/// `pass(input piece, output piece)` over matching pieces of `input` and `out`: in parallel
+/// pieces of [`CHUNK`], or here for small tensors (handing them to the pool costs more than the
+/// pass).
+fn by_pieces(input: &[f32], out: &mut [f32], pass: impl Fn(&[f32], &mut [f32]) + Sync) {
+    if input.len() < 2 * CHUNK {
+        pass(input, out);
+    } else {
+        out.par_chunks_mut(CHUNK)
+            .zip(input.par_chunks(CHUNK))
+            .for_each(|(o, i)| pass(i, o));
+    }
+}
+
 impl ActivationKernels for Flex {
     fn kernel_pointwise(x: FlexTensor, op: Pointwise) -> FlexTensor {
         let shape = x.shape();
         let x = values(&x);
-        // Written straight into the output; small tensors on this thread (handing them to
-        // the pool costs more than the pass).
-        let out = if x.len() < 2 * CHUNK {
-            x.iter().map(|&v| op.apply(v)).collect()
-        } else {
-            x.par_iter()
-                .with_min_len(CHUNK)
-                .map(|&v| op.apply(v))
-                .collect()
-        };
+        let mut out = vec![0.0f32; x.len()];
+        by_pieces(&x, &mut out, |x, out| op.apply_slice(x, out));
         tensor(out, shape)
     }
 }
 
 impl ActivationGradKernels for Flex {
     fn kernel_pointwise_grad(output: FlexTensor, grad: FlexTensor, op: Pointwise) -> FlexTensor {
-        let shape = grad.shape();
-        let (grad, output) = (values(&grad), values(&output));
-        let out = if grad.len() < 2 * CHUNK {
-            grad.iter()
-                .zip(output.iter())
-                .map(|(g, &y)| g * op.derivative(y))
-                .collect()
-        } else {
-            grad.par_iter()
-                .zip(output.par_iter())
-                .with_min_len(CHUNK)
-                .map(|(g, &y)| g * op.derivative(y))
-                .collect()
-        };
-        tensor(out, shape)
+        let output = values(&output);
+        updated(grad, |grad| {
+            by_pieces(&output, grad, |y, g| op.scale_by_derivative(y, g))
+        })
     }
 }
 
@@ -227,7 +257,8 @@ mod tests {
 
     type Activation = fn(Tensor<5>) -> Tensor<5>;
 
-    /// Values and input gradients against burn's, on both CPU devices, on a 5-D volume.
+    /// Values and input gradients against burn's, on both CPU devices, on a 5-D volume small
+    /// enough for one piece and on one split into parallel pieces (the last one short).
     #[test]
     fn matches_burn() {
         let cases: [(&str, Activation, Activation); 4] = [
@@ -240,10 +271,14 @@ mod tests {
             ("sigmoid", sigmoid, activation::sigmoid),
             ("tanh", tanh, activation::tanh),
         ];
-        for device in [Device::flex(), Device::flex().autodiff()] {
+        let shapes = [[2, 3, 4, 5, 6], [1, 4, 8, 64, 41]];
+        assert!(shapes[1].iter().product::<usize>() > 2 * CHUNK);
+        for (device, shape) in [Device::flex(), Device::flex().autodiff()]
+            .into_iter()
+            .flat_map(|d| shapes.map(|s| (d.clone(), s)))
+        {
             for (name, ours_fn, theirs_fn) in cases {
-                let x =
-                    Tensor::<5>::random([2, 3, 4, 5, 6], Distribution::Normal(0.0, 1.0), &device);
+                let x = Tensor::<5>::random(shape, Distribution::Normal(0.0, 1.0), &device);
                 let run = |ours: bool| {
                     let tracked = device.is_autodiff();
                     let x = if tracked {

@@ -30,6 +30,23 @@ pub(crate) fn values(t: &FlexTensor) -> Cow<'_, [f32]> {
     }
 }
 
+/// `t` with `update` applied to its `f32` values in row-major order: in place where `t` alone
+/// owns a buffer holding exactly its values (a gradient handed to a backward usually does), else
+/// on a copy.
+pub(crate) fn updated(mut t: FlexTensor, update: impl FnOnce(&mut [f32])) -> FlexTensor {
+    let n = t.layout().shape().num_elements();
+    if t.as_slice::<f32>().is_some() {
+        if let Some(v) = t.try_storage_mut::<f32>().filter(|v| v.len() == n) {
+            update(v);
+            return t;
+        }
+    }
+    let shape = t.layout().shape().clone();
+    let mut v = values(&t).into_owned();
+    update(&mut v);
+    tensor(v, shape)
+}
+
 /// A tensor of `values` in row-major order.
 pub(crate) fn tensor(values: Vec<f32>, shape: impl Into<Shape>) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape))
