@@ -316,15 +316,16 @@ mod tests {
     type Case = ([usize; 4], [usize; 2], usize, usize, PaddingConfig2d, bool);
 
     /// The kernels against burn's convolution on the shapes MonSter++ uses and the edge cases:
-    /// Winograd (3×3 with 16+ channels each side: odd sizes, asymmetric or no padding, a
-    /// 1-pixel image, batch 2), tap GEMMs (1×1, 7×7, asymmetric padding, dilation, no bias, batch 2, a 1-pixel-wide
-    /// image) and the unfolded path (strides 2 and 4 with and without dilation, thin inputs,
+    /// Winograd (3×3 with 16+ channels each side on 32+ output tiles: odd sizes, asymmetric or
+    /// no padding, batch 2), tap GEMMs (3×3 on small maps, a 1-pixel image, 1×1, 7×7,
+    /// asymmetric padding, dilation, no bias, batch 2, a 1-pixel-wide image) and the unfolded path (strides 2 and 4 with and without dilation, thin inputs,
     /// odd sizes).
     #[test]
     fn matches_burn_convolution() {
         let explicit = PaddingConfig2d::Explicit;
-        let cases: [Case; 17] = [
-            ([1, 20, 8, 9], [16, 3], 1, 1, explicit(0, 1, 2, 1), true),
+        let cases: [Case; 18] = [
+            ([1, 20, 12, 13], [16, 3], 1, 1, explicit(0, 1, 2, 1), true),
+            ([2, 16, 15, 12], [24, 3], 1, 1, PaddingConfig2d::Valid, true),
             ([2, 16, 7, 5], [24, 3], 1, 1, PaddingConfig2d::Valid, true),
             ([1, 32, 1, 1], [16, 3], 1, 1, explicit(1, 1, 1, 1), false),
             ([1, 24, 9, 13], [16, 3], 1, 1, explicit(1, 1, 1, 1), true),
