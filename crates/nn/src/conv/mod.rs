@@ -325,7 +325,7 @@ mod tests {
         let explicit = PaddingConfig2d::Explicit;
         let cases: [Case; 18] = [
             ([1, 20, 12, 13], [16, 3], 1, 1, explicit(0, 1, 2, 1), true),
-            ([2, 16, 15, 12], [24, 3], 1, 1, PaddingConfig2d::Valid, true),
+            ([2, 16, 15, 13], [24, 3], 1, 1, PaddingConfig2d::Valid, true),
             ([2, 16, 7, 5], [24, 3], 1, 1, PaddingConfig2d::Valid, true),
             ([1, 32, 1, 1], [16, 3], 1, 1, explicit(1, 1, 1, 1), false),
             ([1, 24, 9, 13], [16, 3], 1, 1, explicit(1, 1, 1, 1), true),

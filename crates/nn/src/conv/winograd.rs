@@ -130,14 +130,22 @@ fn pad_split(
                 let Some(iy) = y.checked_sub(top).filter(|&iy| iy < h) else {
                     continue;
                 };
+                // The source's even-indexed values land in the half of the parity of `left`,
+                // from column `left/2`; its odd-indexed ones in the other, from `(left+1)/2`.
                 let (even, odd) = row.split_at_mut(half);
-                for (ix, &v) in src[iy * w..(iy + 1) * w].iter().enumerate() {
-                    let x = ix + left;
-                    if x % 2 == 0 {
-                        even[x / 2] = v;
-                    } else {
-                        odd[x / 2] = v;
-                    }
+                let (first, second) = if left % 2 == 0 {
+                    (&mut even[left / 2..], &mut odd[left / 2..])
+                } else {
+                    (&mut odd[left / 2..], &mut even[left.div_ceil(2)..])
+                };
+                let src = &src[iy * w..(iy + 1) * w];
+                let pairs = src.chunks_exact(2);
+                if let [last] = pairs.remainder() {
+                    first[w / 2] = *last;
+                }
+                for ((a, b), pair) in first.iter_mut().zip(second.iter_mut()).zip(pairs) {
+                    *a = pair[0];
+                    *b = pair[1];
                 }
             }
         });
