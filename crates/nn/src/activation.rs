@@ -22,10 +22,7 @@ use rayon::prelude::*;
 
 use crate::conv::on_cpu_training;
 use crate::fastmath;
-use crate::flex_tensor::{tensor, updated, values};
-
-/// Elements per parallel task of the element-wise passes.
-const CHUNK: usize = 1 << 14;
+use crate::flex_tensor::{tensor, updated, values, ELEMENTWISE_CHUNK};
 
 /// `max(x, 0)` (NaN stays NaN, as torch's `relu`).
 pub fn relu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
@@ -180,14 +177,14 @@ fn scale_into(y: &[f32], grad: &mut [f32], d: impl Fn(f32) -> f32) {
 }
 
 /// `pass(input piece, output piece)` over matching pieces of `input` and `out`: in parallel
-/// pieces of [`CHUNK`], or here for small tensors (handing them to the pool costs more than the
-/// pass).
+/// pieces of [`ELEMENTWISE_CHUNK`], or here for small tensors (handing them to the pool costs
+/// more than the pass).
 fn by_pieces(input: &[f32], out: &mut [f32], pass: impl Fn(&[f32], &mut [f32]) + Sync) {
-    if input.len() < 2 * CHUNK {
+    if input.len() < 2 * ELEMENTWISE_CHUNK {
         pass(input, out);
     } else {
-        out.par_chunks_mut(CHUNK)
-            .zip(input.par_chunks(CHUNK))
+        out.par_chunks_mut(ELEMENTWISE_CHUNK)
+            .zip(input.par_chunks(ELEMENTWISE_CHUNK))
             .for_each(|(o, i)| pass(i, o));
     }
 }
@@ -272,7 +269,7 @@ mod tests {
             ("tanh", tanh, activation::tanh),
         ];
         let shapes = [[2, 3, 4, 5, 6], [1, 4, 8, 64, 41]];
-        assert!(shapes[1].iter().product::<usize>() > 2 * CHUNK);
+        assert!(shapes[1].iter().product::<usize>() > 2 * ELEMENTWISE_CHUNK);
         for (device, shape) in [Device::flex(), Device::flex().autodiff()]
             .into_iter()
             .flat_map(|d| shapes.map(|s| (d.clone(), s)))

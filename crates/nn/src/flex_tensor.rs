@@ -6,6 +6,10 @@ use std::borrow::Cow;
 use burn::backend::flex::FlexTensor;
 use burn::tensor::{DType, Shape, TensorData};
 
+/// Elements per parallel task of the element-wise kernels ([`crate::activation`],
+/// [`crate::gate`]): large enough that handing a piece to the pool costs little beside it.
+pub(crate) const ELEMENTWISE_CHUNK: usize = 1 << 14;
+
 /// The dimensions of a tensor known to have `D` of them.
 pub(crate) fn dims<const D: usize>(t: &FlexTensor) -> [usize; D] {
     let shape = t.layout().shape();

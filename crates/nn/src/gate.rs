@@ -16,10 +16,7 @@ use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
 use crate::conv::on_cpu_training;
-use crate::flex_tensor::{tensor, values};
-
-/// Elements per parallel task.
-const CHUNK: usize = 1 << 14;
+use crate::flex_tensor::{tensor, values, ELEMENTWISE_CHUNK};
 
 /// `(1 − z)·h + z·q` of three tensors of one shape.
 pub fn gru_blend(h: Tensor<4>, z: Tensor<4>, q: Tensor<4>) -> Tensor<4> {
@@ -62,13 +59,15 @@ impl GateKernels for Flex {
         let shape = h.shape();
         let (h, z, q) = (values(&h), values(&z), values(&q));
         let mut out = vec![0.0f32; h.len()];
-        out.par_chunks_mut(CHUNK).enumerate().for_each(|(i, dst)| {
-            let at = i * CHUNK;
-            for (k, d) in dst.iter_mut().enumerate() {
-                let (h, z, q) = (h[at + k], z[at + k], q[at + k]);
-                *d = (1.0 - z) * h + z * q;
-            }
-        });
+        out.par_chunks_mut(ELEMENTWISE_CHUNK)
+            .enumerate()
+            .for_each(|(i, dst)| {
+                let at = i * ELEMENTWISE_CHUNK;
+                for (k, d) in dst.iter_mut().enumerate() {
+                    let (h, z, q) = (h[at + k], z[at + k], q[at + k]);
+                    *d = (1.0 - z) * h + z * q;
+                }
+            });
         tensor(out, shape)
     }
 }
@@ -87,12 +86,12 @@ impl GateGradKernels for Flex {
             vec![0.0f32; h.len()],
             vec![0.0f32; h.len()],
         );
-        dh.par_chunks_mut(CHUNK)
-            .zip(dz.par_chunks_mut(CHUNK))
-            .zip(dq.par_chunks_mut(CHUNK))
+        dh.par_chunks_mut(ELEMENTWISE_CHUNK)
+            .zip(dz.par_chunks_mut(ELEMENTWISE_CHUNK))
+            .zip(dq.par_chunks_mut(ELEMENTWISE_CHUNK))
             .enumerate()
             .for_each(|(i, ((dh, dz), dq))| {
-                let at = i * CHUNK;
+                let at = i * ELEMENTWISE_CHUNK;
                 for k in 0..dh.len() {
                     let (h, z, q, g) = (h[at + k], z[at + k], q[at + k], g[at + k]);
                     dh[k] = g * (1.0 - z);

@@ -318,8 +318,8 @@ mod tests {
     /// The kernels against burn's convolution on the shapes MonSter++ uses and the edge cases:
     /// Winograd (3×3 with 16+ channels each side on 32+ output tiles: odd sizes, asymmetric or
     /// no padding, batch 2), tap GEMMs (3×3 on small maps, a 1-pixel image, 1×1, 7×7,
-    /// asymmetric padding, dilation, no bias, batch 2, a 1-pixel-wide image) and the unfolded path (strides 2 and 4 with and without dilation, thin inputs,
-    /// odd sizes).
+    /// asymmetric padding, dilation, no bias, batch 2, a 1-pixel-wide image) and the unfolded
+    /// path (strides 2 and 4 with and without dilation, thin inputs, odd sizes).
     #[test]
     fn matches_burn_convolution() {
         let explicit = PaddingConfig2d::Explicit;

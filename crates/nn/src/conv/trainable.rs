@@ -518,9 +518,9 @@ mod tests {
     }
 
     /// Forward values and the gradients of `x`, the weight and the bias equal burn's
-    /// convolution under autodiff: Winograd and tap GEMMs (stride 1, 3×3 on a small map), the transposed path
-    /// (strides 2 and 3, padding beyond the kernel), dilation, asymmetric padding, 1×1, batch 2,
-    /// thin layers and no bias.
+    /// convolution under autodiff: Winograd and tap GEMMs (stride 1, 3×3 on a small map), the
+    /// transposed path (strides 2 and 3, padding beyond the kernel), dilation, asymmetric
+    /// padding, 1×1, batch 2, thin layers and no bias.
     #[test]
     fn gradients_match_burn_convolution() {
         // (x dims, [co, kh, kw], stride, dilation, [top, left, bottom, right], bias)
