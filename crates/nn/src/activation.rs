@@ -13,7 +13,7 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
@@ -21,6 +21,7 @@ use burn::tensor::{activation, DType, Tensor};
 use rayon::prelude::*;
 
 use crate::conv::on_cpu_training;
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::fastmath;
 use crate::flex_tensor::{tensor, updated, values, ELEMENTWISE_CHUNK};
 
@@ -132,7 +133,7 @@ pub trait ActivationKernels: Backend {
 }
 
 /// The gradient of [`ActivationKernels::kernel_pointwise`] from its output.
-pub trait ActivationGradKernels: Backend {
+pub trait ActivationGradKernels: ActivationKernels {
     fn kernel_pointwise_grad(
         output: FloatTensor<Self>,
         grad: FloatTensor<Self>,
@@ -216,31 +217,18 @@ impl<B: ActivationGradKernels> Backward<B, 1> for PointwiseBackward {
     type State = (FloatTensor<B>, Pointwise);
 
     fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (output, op) = ops.state;
-        if let Some(node) = &ops.parents[0] {
-            grads.register::<B>(node.id, B::kernel_pointwise_grad(output, grad, op));
-        }
+        let (grad, (output, op), [x]) = step_inputs::<B, _, 1>(ops, grads);
+        register::<B>(grads, x, || B::kernel_pointwise_grad(output, grad, op));
     }
 }
 
-impl<B, C> ActivationKernels for Autodiff<B, C>
-where
-    B: ActivationKernels + ActivationGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: ActivationGradKernels, C: CheckpointStrategy> ActivationKernels for Autodiff<B, C> {
     fn kernel_pointwise(x: FloatTensor<Self>, op: Pointwise) -> FloatTensor<Self> {
-        match PointwiseBackward
-            .prepare::<C>([x.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let out = B::kernel_pointwise(x.into_primitive(), op);
-                prep.finish((out.clone(), op), out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_pointwise(x.into_primitive(), op)),
-        }
+        PointwiseBackward.record_from_output::<C>(
+            [x],
+            |[x]| B::kernel_pointwise(x, op),
+            |output| (output, op),
+        )
     }
 }
 
@@ -248,7 +236,7 @@ where
 mod tests {
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::output_and_grads;
 
     use super::*;
 
@@ -276,29 +264,11 @@ mod tests {
         {
             for (name, ours_fn, theirs_fn) in cases {
                 let x = Tensor::<5>::random(shape, Distribution::Normal(0.0, 1.0), &device);
-                let run = |ours: bool| {
-                    let tracked = device.is_autodiff();
-                    let x = if tracked {
-                        x.clone().require_grad()
-                    } else {
-                        x.clone()
-                    };
-                    let y = if ours {
-                        ours_fn(x.clone())
-                    } else {
-                        theirs_fn(x.clone())
-                    };
-                    let grad = tracked.then(|| {
-                        let r = position_weights(y.dims(), &device);
-                        let grads = (y.clone() * r).sum().backward();
-                        x.grad(&grads).expect("input gradient")
-                    });
-                    (y.detach(), grad)
-                };
-                let (ours, theirs) = (run(true), run(false));
+                let ours = output_and_grads([&x], |[x]| ours_fn(x));
+                let theirs = output_and_grads([&x], |[x]| theirs_fn(x));
                 let d: f32 = (ours.0 - theirs.0).abs().max().into_scalar();
                 assert!(d < 1e-6, "{name} {device:?}: values differ by {d}");
-                if let (Some(a), Some(b)) = (ours.1, theirs.1) {
+                if let (Some([a]), Some([b])) = (ours.1, theirs.1) {
                     let d: f32 = (a - b).abs().max().into_scalar();
                     assert!(d < 1e-6, "{name} {device:?}: gradients differ by {d}");
                 }

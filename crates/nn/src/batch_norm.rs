@@ -10,7 +10,7 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
@@ -19,6 +19,7 @@ use burn::tensor::{DType, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{f32_vec, on_cpu_training};
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{tensor, values};
 
 /// `bn.forward(x)`: in training on the CPU device the fused operation (and the running statistics
@@ -95,7 +96,7 @@ pub trait BatchNormKernels: Backend {
 }
 
 /// The gradients of [`BatchNormKernels::kernel_batch_norm_train`]: `(∂x, ∂γ, ∂β)`.
-pub trait BatchNormGradKernels: Backend {
+pub trait BatchNormGradKernels: BatchNormKernels {
     fn kernel_batch_norm_train_grad(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
@@ -204,23 +205,16 @@ impl<B: BatchNormGradKernels> Backward<B, 3> for BatchNormBackward {
     type State = (FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, f32);
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (x, gamma, statistics, epsilon) = ops.state;
+        let (grad, (x, gamma, statistics, epsilon), parents) = step_inputs::<B, _, 3>(ops, grads);
         let (d_x, d_gamma, d_beta) =
             B::kernel_batch_norm_train_grad(x, gamma, statistics, grad, epsilon);
-        for (parent, d) in ops.parents.iter().zip([d_x, d_gamma, d_beta]) {
-            if let Some(node) = parent {
-                grads.register::<B>(node.id, d);
-            }
+        for (parent, d) in parents.into_iter().zip([d_x, d_gamma, d_beta]) {
+            register::<B>(grads, parent, || d);
         }
     }
 }
 
-impl<B, C> BatchNormKernels for Autodiff<B, C>
-where
-    B: BatchNormKernels + BatchNormGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: BatchNormGradKernels, C: CheckpointStrategy> BatchNormKernels for Autodiff<B, C> {
     fn kernel_batch_norm_train(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
@@ -228,31 +222,17 @@ where
         statistics: FloatTensor<Self>,
         epsilon: f32,
     ) -> FloatTensor<Self> {
-        let statistics = statistics.into_primitive();
-        match BatchNormBackward
-            .prepare::<C>([x.node(), gamma.node(), beta.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let (x, gamma) = (x.into_primitive(), gamma.into_primitive());
-                let out = B::kernel_batch_norm_train(
-                    x.clone(),
-                    gamma.clone(),
-                    beta.into_primitive(),
-                    statistics.clone(),
-                    epsilon,
-                );
-                prep.finish((x, gamma, statistics, epsilon), out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_batch_norm_train(
-                x.into_primitive(),
-                gamma.into_primitive(),
-                beta.into_primitive(),
-                statistics,
-                epsilon,
-            )),
-        }
+        BatchNormBackward.record::<C, _>(
+            [x, gamma, beta],
+            statistics.into_primitive(),
+            |_, [x, gamma, _], statistics| {
+                let [x, gamma] = [x, gamma].map(|t| t.primitive().clone());
+                (x, gamma, statistics.clone(), epsilon)
+            },
+            |[x, gamma, beta], statistics| {
+                B::kernel_batch_norm_train(x, gamma, beta, statistics, epsilon)
+            },
+        )
     }
 }
 
@@ -261,7 +241,7 @@ mod tests {
     use burn::nn::BatchNormConfig;
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::{assert_close, position_weights};
+    use crate::test_support::{assert_close, position_weighted_grads};
 
     use super::*;
 
@@ -285,9 +265,7 @@ mod tests {
                 } else {
                     layer.forward(x.clone())
                 };
-                let grads = (y.clone() * position_weights(y.dims(), &device))
-                    .sum()
-                    .backward();
+                let grads = position_weighted_grads(&y);
                 last = Some((
                     y.inner(),
                     x.grad(&grads).expect("x gradient"),

@@ -8,7 +8,7 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
@@ -16,6 +16,7 @@ use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
 use crate::conv::on_cpu_training;
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{tensor, values, ELEMENTWISE_CHUNK};
 
 /// `(1 − z)·h + z·q` of three tensors of one shape.
@@ -45,7 +46,7 @@ pub trait GateKernels: Backend {
 }
 
 /// The gradients of [`GateKernels::kernel_gru_blend`]: `(∂h, ∂z, ∂q)`.
-pub trait GateGradKernels: Backend {
+pub trait GateGradKernels: GateKernels {
     fn kernel_gru_blend_grad(
         h: FloatTensor<Self>,
         z: FloatTensor<Self>,
@@ -111,43 +112,26 @@ impl<B: GateGradKernels> Backward<B, 3> for GruBlendBackward {
     type State = [FloatTensor<B>; 3];
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let [h, z, q] = ops.state;
+        let (grad, [h, z, q], parents) = step_inputs::<B, _, 3>(ops, grads);
         let partials = B::kernel_gru_blend_grad(h, z, q, grad);
-        for (parent, d) in ops.parents.iter().zip(partials) {
-            if let Some(node) = parent {
-                grads.register::<B>(node.id, d);
-            }
+        for (parent, d) in parents.into_iter().zip(partials) {
+            register::<B>(grads, parent, || d);
         }
     }
 }
 
-impl<B, C> GateKernels for Autodiff<B, C>
-where
-    B: GateKernels + GateGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: GateGradKernels, C: CheckpointStrategy> GateKernels for Autodiff<B, C> {
     fn kernel_gru_blend(
         h: FloatTensor<Self>,
         z: FloatTensor<Self>,
         q: FloatTensor<Self>,
     ) -> FloatTensor<Self> {
-        match GruBlendBackward
-            .prepare::<C>([h.node(), z.node(), q.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let [h, z, q] = [h, z, q].map(|t| t.into_primitive());
-                let out = B::kernel_gru_blend(h.clone(), z.clone(), q.clone());
-                prep.finish([h, z, q], out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_gru_blend(
-                h.into_primitive(),
-                z.into_primitive(),
-                q.into_primitive(),
-            )),
-        }
+        GruBlendBackward.record::<C, _>(
+            [h, z, q],
+            (),
+            |_, inputs, ()| inputs.each_ref().map(|t| t.primitive().clone()),
+            |[h, z, q], ()| B::kernel_gru_blend(h, z, q),
+        )
     }
 }
 
@@ -155,7 +139,7 @@ where
 mod tests {
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::output_and_grads;
 
     use super::*;
 
@@ -168,17 +152,15 @@ mod tests {
         let z = random(Distribution::Uniform(0.0, 1.0));
         let q = random(Distribution::Normal(0.0, 1.0));
         let run = |fused: bool| {
-            let [h, z, q] = [&h, &z, &q].map(|t| t.clone().require_grad());
-            let y = if fused {
-                gru_blend(h.clone(), z.clone(), q.clone())
-            } else {
-                z.clone().neg().add_scalar(1.0) * h.clone() + z.clone() * q.clone()
-            };
-            let grads = (y.clone() * position_weights(y.dims(), &device))
-                .sum()
-                .backward();
-            let grad = |t: &Tensor<4>| t.grad(&grads).expect("gradient");
-            [y.inner(), grad(&h), grad(&z), grad(&q)]
+            let (y, grads) = output_and_grads([&h, &z, &q], |[h, z, q]| {
+                if fused {
+                    gru_blend(h, z, q)
+                } else {
+                    z.clone().neg().add_scalar(1.0) * h + z * q
+                }
+            });
+            let [dh, dz, dq] = grads.expect("an autodiff device");
+            [y, dh, dz, dq]
         };
         for (name, (a, b)) in ["value", "∂h", "∂z", "∂q"]
             .iter()

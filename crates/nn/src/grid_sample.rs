@@ -15,7 +15,7 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
@@ -24,6 +24,7 @@ use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
 use crate::conv::on_cpu_training;
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 
 /// `input.grid_sample_2d(grid, options)` (`input` `[N, C, H, W]`, `grid` `[N, Ho, Wo, 2]` of
@@ -168,7 +169,7 @@ pub trait GridSampleKernels: Backend {
 }
 
 /// The gradients of [`GridSampleKernels::kernel_grid_sample`]: `(∂L/∂input, ∂L/∂grid)`.
-pub trait GridSampleGradKernels: Backend {
+pub trait GridSampleGradKernels: GridSampleKernels {
     fn kernel_grid_sample_grad(
         input: FloatTensor<Self>,
         grid: FloatTensor<Self>,
@@ -268,44 +269,32 @@ impl<B: GridSampleGradKernels> Backward<B, 2> for GridSampleBackward {
     type State = (FloatTensor<B>, FloatTensor<B>, Sampling);
 
     fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (input, grid, sampling) = ops.state;
+        let (grad, (input, grid, sampling), parents) = step_inputs::<B, _, 2>(ops, grads);
         let (d_input, d_grid) = B::kernel_grid_sample_grad(input, grid, grad, sampling);
-        if let Some(node) = &ops.parents[0] {
-            grads.register::<B>(node.id, d_input);
-        }
-        if let Some(node) = &ops.parents[1] {
-            grads.register::<B>(node.id, d_grid);
+        for (parent, d) in parents.into_iter().zip([d_input, d_grid]) {
+            register::<B>(grads, parent, || d);
         }
     }
 }
 
-impl<B, C> GridSampleKernels for Autodiff<B, C>
-where
-    B: GridSampleKernels + GridSampleGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: GridSampleGradKernels, C: CheckpointStrategy> GridSampleKernels for Autodiff<B, C> {
     fn kernel_grid_sample(
         input: FloatTensor<Self>,
         grid: FloatTensor<Self>,
         sampling: Sampling,
     ) -> FloatTensor<Self> {
-        match GridSampleBackward
-            .prepare::<C>([input.node(), grid.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let (input, grid) = (input.into_primitive(), grid.into_primitive());
-                let out = B::kernel_grid_sample(input.clone(), grid.clone(), sampling);
-                prep.finish((input, grid, sampling), out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_grid_sample(
-                input.into_primitive(),
-                grid.into_primitive(),
-                sampling,
-            )),
-        }
+        GridSampleBackward.record::<C, _>(
+            [input, grid],
+            (),
+            |_, [input, grid], ()| {
+                (
+                    input.primitive().clone(),
+                    grid.primitive().clone(),
+                    sampling,
+                )
+            },
+            |[input, grid], ()| B::kernel_grid_sample(input, grid, sampling),
+        )
     }
 }
 
@@ -313,7 +302,7 @@ where
 mod tests {
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::output_and_grads;
 
     use super::*;
 
@@ -330,33 +319,16 @@ mod tests {
                     let options = GridSampleOptions::new(InterpolateMode::Bilinear)
                         .with_padding_mode(padding)
                         .with_align_corners(align_corners);
-                    let run = |ours: bool| {
-                        let tracked = device.is_autodiff();
-                        let (x, g) = if tracked {
-                            (input.clone().require_grad(), grid.clone().require_grad())
-                        } else {
-                            (input.clone(), grid.clone())
-                        };
-                        let y = if ours {
-                            grid_sample_2d(x.clone(), g.clone(), options.clone())
-                        } else {
-                            x.clone().grid_sample_2d(g.clone(), options.clone())
-                        };
-                        let grads = tracked.then(|| {
-                            let r = position_weights(y.dims(), &device);
-                            let grads = (y.clone() * r).sum().backward();
-                            (
-                                x.grad(&grads).expect("image gradient"),
-                                g.grad(&grads).expect("grid gradient"),
-                            )
-                        });
-                        (y.detach(), grads)
-                    };
-                    let (ours, theirs) = (run(true), run(false));
+                    let ours = output_and_grads([&input, &grid], |[x, g]| {
+                        grid_sample_2d(x, g, options.clone())
+                    });
+                    let theirs = output_and_grads([&input, &grid], |[x, g]| {
+                        x.grid_sample_2d(g, options.clone())
+                    });
                     let what = format!("{device:?} {padding:?} align_corners={align_corners}");
                     let d: f32 = (ours.0 - theirs.0).abs().max().into_scalar();
                     assert!(d < 1e-5, "{what}: values differ by {d}");
-                    if let (Some((xa, ga)), Some((xb, gb))) = (ours.1, theirs.1) {
+                    if let (Some([xa, ga]), Some([xb, gb])) = (ours.1, theirs.1) {
                         let d: f32 = (xa - xb).abs().max().into_scalar();
                         assert!(d < 1e-5, "{what}: image gradients differ by {d}");
                         let d: f32 = (ga - gb).abs().max().into_scalar();

@@ -11,13 +11,14 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
 use burn::tensor::Tensor;
 use rayon::prelude::*;
 
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{all_f32, dims, tensor, values};
 
 /// `out[n, g, k] = src[n, g, ·]` interpolated at `pos[n, k]` (`src` `[n, g, len]`, `pos`
@@ -55,7 +56,7 @@ pub trait InterpKernels: Backend {
 }
 
 /// The gradient of [`InterpKernels::kernel_linear_taps`] with respect to `src`.
-pub trait InterpGradKernels: Backend {
+pub trait InterpGradKernels: InterpKernels {
     fn kernel_linear_taps_grad(
         grad: FloatTensor<Self>,
         pos: &FloatTensor<Self>,
@@ -121,35 +122,19 @@ impl<B: InterpGradKernels> Backward<B, 1> for LinearTapsBackward {
     type State = (FloatTensor<B>, usize);
 
     fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (pos, len) = ops.state;
-        if let Some(node) = &ops.parents[0] {
-            grads.register::<B>(node.id, B::kernel_linear_taps_grad(grad, &pos, len));
-        }
+        let (grad, (pos, len), [src]) = step_inputs::<B, _, 1>(ops, grads);
+        register::<B>(grads, src, || B::kernel_linear_taps_grad(grad, &pos, len));
     }
 }
 
-impl<B, C> InterpKernels for Autodiff<B, C>
-where
-    B: InterpKernels + InterpGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: InterpGradKernels, C: CheckpointStrategy> InterpKernels for Autodiff<B, C> {
     fn kernel_linear_taps(src: FloatTensor<Self>, pos: FloatTensor<Self>) -> FloatTensor<Self> {
-        let len = src.primitive().shape()[2];
-        let pos = pos.into_primitive();
-        match LinearTapsBackward
-            .prepare::<C>([src.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let out = B::kernel_linear_taps(src.into_primitive(), pos.clone());
-                prep.finish((pos, len), out)
-            }
-            OpsKind::UnTracked(prep) => {
-                prep.finish(B::kernel_linear_taps(src.into_primitive(), pos))
-            }
-        }
+        LinearTapsBackward.record::<C, _>(
+            [src],
+            pos.into_primitive(),
+            |_, [src], pos| (pos.clone(), src.primitive().shape()[2]),
+            |[src], pos| B::kernel_linear_taps(src, pos),
+        )
     }
 }
 

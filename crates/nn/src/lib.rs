@@ -43,6 +43,7 @@ pub mod batch_norm;
 pub mod bench;
 pub mod config;
 pub mod conv;
+mod custom_op;
 pub mod device;
 pub mod dinov3;
 pub mod fastmath;

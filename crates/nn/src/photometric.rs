@@ -12,13 +12,14 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
 use burn::tensor::{DType, Device, Tensor};
 use rayon::prelude::*;
 
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 
 /// SSIM stabilisers for images in `[0, 1]`: `C1 = 0.01²`, `C2 = 0.03²` (Monodepth's).
@@ -131,7 +132,7 @@ pub trait PhotometricKernels: Backend {
 }
 
 /// The gradient of [`PhotometricKernels::kernel_photometric`] with respect to `y`.
-pub trait PhotometricGradKernels: Backend {
+pub trait PhotometricGradKernels: PhotometricKernels {
     fn kernel_photometric_grad(
         x: FloatTensor<Self>,
         y: FloatTensor<Self>,
@@ -233,38 +234,24 @@ impl<B: PhotometricGradKernels> Backward<B, 1> for PhotometricBackward {
     type State = (FloatTensor<B>, FloatTensor<B>, Photometric);
 
     fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (x, y, options) = ops.state;
-        if let Some(node) = &ops.parents[0] {
-            grads.register::<B>(node.id, B::kernel_photometric_grad(x, y, grad, options));
-        }
+        let (grad, (x, y, options), [y_parent]) = step_inputs::<B, _, 1>(ops, grads);
+        register::<B>(grads, y_parent, || {
+            B::kernel_photometric_grad(x, y, grad, options)
+        });
     }
 }
 
-impl<B, C> PhotometricKernels for Autodiff<B, C>
-where
-    B: PhotometricKernels + PhotometricGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: PhotometricGradKernels, C: CheckpointStrategy> PhotometricKernels for Autodiff<B, C> {
     fn kernel_photometric(
         x: FloatTensor<Self>,
         y: FloatTensor<Self>,
         options: Photometric,
     ) -> FloatTensor<Self> {
-        let x = x.into_primitive();
-        match PhotometricBackward
-            .prepare::<C>([y.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let y = y.into_primitive();
-                let out = B::kernel_photometric(x.clone(), y.clone(), options);
-                prep.finish((x, y, options), out)
-            }
-            OpsKind::UnTracked(prep) => {
-                prep.finish(B::kernel_photometric(x, y.into_primitive(), options))
-            }
-        }
+        PhotometricBackward.record::<C, _>(
+            [y],
+            x.into_primitive(),
+            |_, [y], x| (x.clone(), y.primitive().clone(), options),
+            |[y], x| B::kernel_photometric(x, y, options),
+        )
     }
 }

@@ -8,7 +8,7 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
@@ -18,6 +18,7 @@ use burn::tensor::{DType, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 
 /// PyTorch's `avg_pool2d(x, k, stride, padding, count_include_pad=True)` with a square window.
@@ -112,7 +113,7 @@ pub trait PoolKernels: Backend {
 }
 
 /// The gradient of [`PoolKernels::kernel_avg_pool2d`].
-pub trait PoolGradKernels: Backend {
+pub trait PoolGradKernels: PoolKernels {
     fn kernel_avg_pool2d_grad(
         grad: FloatTensor<Self>,
         input: [usize; 2],
@@ -165,35 +166,22 @@ impl<B: PoolGradKernels> Backward<B, 1> for AvgPoolBackward {
     type State = ([usize; 2], [usize; 6]);
 
     fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (input, window) = ops.state;
-        if let Some(node) = &ops.parents[0] {
-            grads.register::<B>(node.id, B::kernel_avg_pool2d_grad(grad, input, window));
-        }
+        let (grad, (input, window), [x]) = step_inputs::<B, _, 1>(ops, grads);
+        register::<B>(grads, x, || B::kernel_avg_pool2d_grad(grad, input, window));
     }
 }
 
-impl<B, C> PoolKernels for Autodiff<B, C>
-where
-    B: PoolKernels + PoolGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: PoolGradKernels, C: CheckpointStrategy> PoolKernels for Autodiff<B, C> {
     fn kernel_avg_pool2d(x: FloatTensor<Self>, window: [usize; 6]) -> FloatTensor<Self> {
-        let shape = x.primitive().shape();
-        let input = [shape[2], shape[3]];
-        match AvgPoolBackward
-            .prepare::<C>([x.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish(
-                (input, window),
-                B::kernel_avg_pool2d(x.into_primitive(), window),
-            ),
-            OpsKind::UnTracked(prep) => {
-                prep.finish(B::kernel_avg_pool2d(x.into_primitive(), window))
-            }
-        }
+        AvgPoolBackward.record::<C, _>(
+            [x],
+            (),
+            |_, [x], ()| {
+                let shape = x.primitive().shape();
+                ([shape[2], shape[3]], window)
+            },
+            |[x], ()| B::kernel_avg_pool2d(x, window),
+        )
     }
 }
 
@@ -233,7 +221,7 @@ mod tests {
     use super::*;
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::position_weights;
+    use crate::test_support::output_and_grads;
 
     /// The plain kernel against burn's on the ConvGRU's pooling (3×3, stride 2, padding 1) of
     /// even and odd sizes, a 2×2 window without padding and the SSIM's 1-D box windows.
@@ -255,37 +243,18 @@ mod tests {
                 ([1, 3, 12, 13], [11, 1], [1, 1], [5, 0]),
             ] {
                 let x = Tensor::<4>::random(dims, Distribution::Normal(0.0, 1.0), &device);
-                let run = |ours: bool| {
-                    let tracked = device.is_autodiff();
-                    let x = if tracked {
-                        x.clone().require_grad()
-                    } else {
-                        x.clone()
-                    };
-                    let y = if ours {
-                        avg_pool2d_box(x.clone(), k, stride, padding)
-                    } else {
-                        avg_pool2d(
-                            x.clone(),
-                            AvgPoolOptions::new(k)
-                                .with_stride(stride)
-                                .with_padding(padding)
-                                .with_count_include_pad(true),
-                        )
-                    };
-                    let grad = tracked.then(|| {
-                        // The same upstream gradient for both: a function of the position.
-                        let r = position_weights(y.dims(), &device);
-                        let grads = (y.clone() * r).sum().backward();
-                        x.grad(&grads).expect("input gradient")
-                    });
-                    (y.detach(), grad)
-                };
-                let (ours, theirs) = (run(true), run(false));
+                let ours = output_and_grads([&x], |[x]| avg_pool2d_box(x, k, stride, padding));
+                let theirs = output_and_grads([&x], |[x]| {
+                    let options = AvgPoolOptions::new(k)
+                        .with_stride(stride)
+                        .with_padding(padding)
+                        .with_count_include_pad(true);
+                    avg_pool2d(x, options)
+                });
                 let what = format!("{device:?} {dims:?} k{k:?} s{stride:?} p{padding:?}");
                 let d = max_difference(ours.0, theirs.0);
                 assert!(d < 1e-6, "{what}: {d}");
-                if let (Some(a), Some(b)) = (ours.1, theirs.1) {
+                if let (Some([a]), Some([b])) = (ours.1, theirs.1) {
                     let d = max_difference(a, b);
                     assert!(d < 1e-6, "{what} gradient: {d}");
                 }

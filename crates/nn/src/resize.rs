@@ -15,7 +15,7 @@
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, TensorMetadata};
@@ -25,6 +25,7 @@ use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 
 /// Bilinear resize of `B×C×H×W` to `size = [H', W']` with PyTorch's `align_corners` semantics.
@@ -162,7 +163,7 @@ pub trait ResizeKernels: Backend {
 }
 
 /// The gradient of [`ResizeKernels::kernel_resize_bilinear`] for an input of `size`.
-pub trait ResizeGradKernels: Backend {
+pub trait ResizeGradKernels: ResizeKernels {
     fn kernel_resize_bilinear_grad(
         grad: FloatTensor<Self>,
         size: [usize; 2],
@@ -199,42 +200,28 @@ impl<B: ResizeGradKernels> Backward<B, 1> for ResizeBackward {
     type State = ([usize; 2], bool);
 
     fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (size, align_corners) = ops.state;
-        if let Some(node) = &ops.parents[0] {
-            let dx = B::kernel_resize_bilinear_grad(grad, size, align_corners);
-            grads.register::<B>(node.id, dx);
-        }
+        let (grad, (size, align_corners), [x]) = step_inputs::<B, _, 1>(ops, grads);
+        register::<B>(grads, x, || {
+            B::kernel_resize_bilinear_grad(grad, size, align_corners)
+        });
     }
 }
 
-impl<B, C> ResizeKernels for Autodiff<B, C>
-where
-    B: ResizeKernels + ResizeGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: ResizeGradKernels, C: CheckpointStrategy> ResizeKernels for Autodiff<B, C> {
     fn kernel_resize_bilinear(
         x: FloatTensor<Self>,
         size: [usize; 2],
         align_corners: bool,
     ) -> FloatTensor<Self> {
-        let shape = x.primitive().shape();
-        let input_size = [shape[2], shape[3]];
-        match ResizeBackward
-            .prepare::<C>([x.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let out = B::kernel_resize_bilinear(x.into_primitive(), size, align_corners);
-                prep.finish((input_size, align_corners), out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_resize_bilinear(
-                x.into_primitive(),
-                size,
-                align_corners,
-            )),
-        }
+        ResizeBackward.record::<C, _>(
+            [x],
+            (),
+            |_, [x], ()| {
+                let shape = x.primitive().shape();
+                ([shape[2], shape[3]], align_corners)
+            },
+            |[x], ()| B::kernel_resize_bilinear(x, size, align_corners),
+        )
     }
 }
 

@@ -1,6 +1,6 @@
 //! Helpers shared by the kernels' unit tests.
 
-use burn::tensor::{Device, Int, Tensor};
+use burn::tensor::{Device, Gradients, Int, Tensor};
 
 /// A fixed, varied upstream gradient of shape `dims`: `sin(0.37·i)` of the flat index `i`, so
 /// that a gradient comparison feeds both sides the same values, no two neighbours alike.
@@ -11,6 +11,36 @@ pub(crate) fn position_weights<const D: usize>(dims: [usize; D], device: &Device
         .mul_scalar(0.37)
         .sin()
         .reshape(dims)
+}
+
+/// The gradients of `sum(y · position_weights)`: `y`'s backward under the fixed upstream
+/// gradient of [`position_weights`].
+pub(crate) fn position_weighted_grads<const D: usize>(y: &Tensor<D>) -> Gradients {
+    (y.clone() * position_weights(y.dims(), &y.device()))
+        .sum()
+        .backward()
+}
+
+/// `layer(inputs)` detached and, where the inputs live on an autodiff device, their gradients
+/// under [`position_weighted_grads`]: one side of a comparison with burn's operation.
+pub(crate) fn output_and_grads<const D: usize, const E: usize, const N: usize>(
+    inputs: [&Tensor<D>; N],
+    layer: impl FnOnce([Tensor<D>; N]) -> Tensor<E>,
+) -> (Tensor<E>, Option<[Tensor<D>; N]>) {
+    let tracked = inputs[0].device().is_autodiff();
+    let inputs = inputs.map(|x| {
+        if tracked {
+            x.clone().require_grad()
+        } else {
+            x.clone()
+        }
+    });
+    let y = layer(inputs.clone());
+    let grads = tracked.then(|| {
+        let grads = position_weighted_grads(&y);
+        inputs.map(|x| x.grad(&grads).expect("input gradient"))
+    });
+    (y.detach(), grads)
 }
 
 /// Asserts `ours` equals `reference` in shape and, element by element, within 1e-4 of the

@@ -14,7 +14,7 @@ use std::sync::Arc;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::autodiff::NodeId;
 use burn::backend::flex::FlexTensor;
 use burn::backend::ops::{ConvOptions, ConvTransposeOptions, ModuleOps};
@@ -27,6 +27,7 @@ use super::kernels::{
     conv2d_nchw, conv_transpose2d_nchw, Epilogue, Geometry, Nchw, TransposeGeometry,
 };
 use super::prepared::{prepared_for_buffer, LayerWeights};
+use crate::custom_op::{checkpoint_input_and_weight, checkpointed_step_inputs, register, RecordOp};
 use crate::flex_tensor::{all_f32, dims, tensor, values};
 
 /// `conv2d(x, weight, bias)` (one group, explicit padding) on the kernels, differentiable where
@@ -110,7 +111,7 @@ pub trait ConvKernels: Backend {
 }
 
 /// The gradients of [`ConvKernels::kernel_conv2d`] on a backend that has the kernels.
-pub trait ConvGradKernels: Backend {
+pub trait ConvGradKernels: ConvKernels {
     fn kernel_conv2d_x_grad(
         x: &FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -318,29 +319,20 @@ impl ConvGradKernels for Flex {
 struct Conv2dBackward<const N: usize>;
 
 impl<B: ConvGradKernels, const N: usize> Backward<B, N> for Conv2dBackward<N> {
-    type State = (NodeId, NodeId, ConvOptions<2>);
+    type State = ([NodeId; 2], ConvOptions<2>);
 
-    fn backward(
-        self,
-        ops: Ops<Self::State, N>,
-        grads: &mut Gradients,
-        checkpointer: &mut Checkpointer,
-    ) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (x_state, weight_state, options) = ops.state;
-        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
-        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
-        if let Some(node) = &ops.parents[0] {
-            let dx = B::kernel_conv2d_x_grad(&x, weight.clone(), grad.clone(), options.clone());
-            grads.register::<B>(node.id, dx);
-        }
-        if let Some(node) = &ops.parents[1] {
-            let dw = B::kernel_conv2d_weight_grad(x, &weight, grad.clone(), options);
-            grads.register::<B>(node.id, dw);
-        }
-        if let Some(Some(node)) = ops.parents.get(2) {
-            grads.register::<B>(node.id, B::kernel_conv2d_bias_grad(grad));
-        }
+    fn backward(self, ops: Ops<Self::State, N>, grads: &mut Gradients, saved: &mut Checkpointer) {
+        let (grad, [x, weight], options, parents) =
+            checkpointed_step_inputs::<B, _, N>(ops, grads, saved);
+        register::<B>(grads, parents[0], || {
+            B::kernel_conv2d_x_grad(&x, weight.clone(), grad.clone(), options.clone())
+        });
+        register::<B>(grads, parents[1], || {
+            B::kernel_conv2d_weight_grad(x, &weight, grad.clone(), options)
+        });
+        register::<B>(grads, bias_parent(&parents), || {
+            B::kernel_conv2d_bias_grad(grad)
+        });
     }
 }
 
@@ -349,67 +341,42 @@ impl<B: ConvGradKernels, const N: usize> Backward<B, N> for Conv2dBackward<N> {
 #[derive(Debug)]
 struct ConvTranspose2dBackward<const N: usize>;
 
-impl<B, const N: usize> Backward<B, N> for ConvTranspose2dBackward<N>
-where
-    B: ConvKernels + ConvGradKernels,
-{
-    type State = (NodeId, NodeId, TransposeGeometry);
+impl<B: ConvGradKernels, const N: usize> Backward<B, N> for ConvTranspose2dBackward<N> {
+    type State = ([NodeId; 2], TransposeGeometry);
 
-    fn backward(
-        self,
-        ops: Ops<Self::State, N>,
-        grads: &mut Gradients,
-        checkpointer: &mut Checkpointer,
-    ) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (x_state, weight_state, geometry) = ops.state;
-        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
-        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
+    fn backward(self, ops: Ops<Self::State, N>, grads: &mut Gradients, saved: &mut Checkpointer) {
+        let (grad, [x, weight], geometry, parents) =
+            checkpointed_step_inputs::<B, _, N>(ops, grads, saved);
         let options = forward_options(&geometry);
-        if let Some(node) = &ops.parents[0] {
-            let dx = B::kernel_conv2d(grad.clone(), weight.clone(), options.clone());
-            grads.register::<B>(node.id, dx);
-        }
-        if let Some(node) = &ops.parents[1] {
-            let dw = B::kernel_conv2d_weight_grad(grad.clone(), &weight, x, options);
-            grads.register::<B>(node.id, dw);
-        }
-        if let Some(Some(node)) = ops.parents.get(2) {
-            grads.register::<B>(node.id, B::kernel_conv2d_bias_grad(grad));
-        }
+        register::<B>(grads, parents[0], || {
+            B::kernel_conv2d(grad.clone(), weight.clone(), options.clone())
+        });
+        register::<B>(grads, parents[1], || {
+            B::kernel_conv2d_weight_grad(grad.clone(), &weight, x, options)
+        });
+        register::<B>(grads, bias_parent(&parents), || {
+            B::kernel_conv2d_bias_grad(grad)
+        });
     }
 }
 
-impl<B, C> ConvKernels for Autodiff<B, C>
-where
-    B: ConvKernels + ConvGradKernels,
-    C: CheckpointStrategy,
-{
+/// The bias's parent of a convolution step: the third where there is one.
+fn bias_parent<const N: usize>(parents: &[Option<NodeId>; N]) -> Option<NodeId> {
+    parents.get(2).copied().flatten()
+}
+
+impl<B: ConvGradKernels, C: CheckpointStrategy> ConvKernels for Autodiff<B, C> {
     fn kernel_conv2d(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
         options: ConvOptions<2>,
     ) -> FloatTensor<Self> {
-        match Conv2dBackward::<2>
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&x),
-                    prep.checkpoint(&weight),
-                    options.clone(),
-                );
-                let out = B::kernel_conv2d(x.into_primitive(), weight.into_primitive(), options);
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv2d(
-                x.into_primitive(),
-                weight.into_primitive(),
-                options,
-            )),
-        }
+        Conv2dBackward::<2>.record::<C, _>(
+            [x, weight],
+            options,
+            checkpoint_input_and_weight,
+            |[x, weight], options| B::kernel_conv2d(x, weight, options),
+        )
     }
 
     fn kernel_conv2d_bias(
@@ -418,32 +385,12 @@ where
         bias: FloatTensor<Self>,
         options: ConvOptions<2>,
     ) -> FloatTensor<Self> {
-        match Conv2dBackward::<3>
-            .prepare::<C>([x.node(), weight.node(), bias.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&x),
-                    prep.checkpoint(&weight),
-                    options.clone(),
-                );
-                let out = B::kernel_conv2d_bias(
-                    x.into_primitive(),
-                    weight.into_primitive(),
-                    bias.into_primitive(),
-                    options,
-                );
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv2d_bias(
-                x.into_primitive(),
-                weight.into_primitive(),
-                bias.into_primitive(),
-                options,
-            )),
-        }
+        Conv2dBackward::<3>.record::<C, _>(
+            [x, weight, bias],
+            options,
+            checkpoint_input_and_weight,
+            |[x, weight, bias], options| B::kernel_conv2d_bias(x, weight, bias, options),
+        )
     }
 
     fn kernel_conv_transpose2d(
@@ -451,26 +398,12 @@ where
         weight: FloatTensor<Self>,
         geometry: TransposeGeometry,
     ) -> FloatTensor<Self> {
-        match ConvTranspose2dBackward::<2>
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&x), prep.checkpoint(&weight), geometry);
-                let out = B::kernel_conv_transpose2d(
-                    x.into_primitive(),
-                    weight.into_primitive(),
-                    geometry,
-                );
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv_transpose2d(
-                x.into_primitive(),
-                weight.into_primitive(),
-                geometry,
-            )),
-        }
+        ConvTranspose2dBackward::<2>.record::<C, _>(
+            [x, weight],
+            geometry,
+            checkpoint_input_and_weight,
+            |[x, weight], geometry| B::kernel_conv_transpose2d(x, weight, geometry),
+        )
     }
 
     fn kernel_conv_transpose2d_bias(
@@ -479,28 +412,14 @@ where
         bias: FloatTensor<Self>,
         geometry: TransposeGeometry,
     ) -> FloatTensor<Self> {
-        match ConvTranspose2dBackward::<3>
-            .prepare::<C>([x.node(), weight.node(), bias.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&x), prep.checkpoint(&weight), geometry);
-                let out = B::kernel_conv_transpose2d_bias(
-                    x.into_primitive(),
-                    weight.into_primitive(),
-                    bias.into_primitive(),
-                    geometry,
-                );
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv_transpose2d_bias(
-                x.into_primitive(),
-                weight.into_primitive(),
-                bias.into_primitive(),
-                geometry,
-            )),
-        }
+        ConvTranspose2dBackward::<3>.record::<C, _>(
+            [x, weight, bias],
+            geometry,
+            checkpoint_input_and_weight,
+            |[x, weight, bias], geometry| {
+                B::kernel_conv_transpose2d_bias(x, weight, bias, geometry)
+            },
+        )
     }
 }
 
@@ -509,12 +428,44 @@ mod tests {
     use burn::tensor::module::{conv2d as burn_conv2d, conv_transpose2d as burn_conv_transpose2d};
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::{assert_close, position_weights};
+    use crate::test_support::{assert_close, position_weighted_grads};
 
     use super::*;
 
     fn random<const D: usize>(dims: [usize; D], device: &Device) -> Tensor<D> {
         Tensor::random(dims, Distribution::Normal(0.0, 1.0), device)
+    }
+
+    /// The output of `layer(x, weight, bias)` under autodiff and the gradients of `x`, the
+    /// weight and the bias.
+    type Outcome = (Tensor<4>, Tensor<4>, Tensor<4>, Option<Tensor<1>>);
+
+    fn outcome(
+        [x, weight]: [&Tensor<4>; 2],
+        bias: &Option<Tensor<1>>,
+        layer: impl FnOnce(Tensor<4>, Tensor<4>, Option<Tensor<1>>) -> Tensor<4>,
+    ) -> Outcome {
+        let x = x.clone().require_grad();
+        let weight = weight.clone().require_grad();
+        let bias = bias.clone().map(Tensor::require_grad);
+        let y = layer(x.clone(), weight.clone(), bias.clone());
+        let grads = position_weighted_grads(&y);
+        (
+            y.inner(),
+            x.grad(&grads).expect("x gradient"),
+            weight.grad(&grads).expect("weight gradient"),
+            bias.map(|b| b.grad(&grads).expect("bias gradient")),
+        )
+    }
+
+    /// Asserts our outcome equals burn's, part by part.
+    fn assert_outcomes_close(what: &str, ours: Outcome, theirs: Outcome) {
+        assert_close(&format!("{what} output"), ours.0, theirs.0);
+        assert_close(&format!("{what} ∂x"), ours.1, theirs.1);
+        assert_close(&format!("{what} ∂w"), ours.2, theirs.2);
+        if let (Some(a), Some(b)) = (ours.3, theirs.3) {
+            assert_close(&format!("{what} ∂b"), a, b);
+        }
     }
 
     /// Forward values and the gradients of `x`, the weight and the bias equal burn's
@@ -555,33 +506,12 @@ mod tests {
                 [dilation; 2],
                 1,
             );
-            let run = |ours: bool| {
-                let x = x.clone().require_grad();
-                let weight = weight.clone().require_grad();
-                let bias = bias.clone().map(Tensor::require_grad);
-                let y = if ours {
-                    conv2d(x.clone(), weight.clone(), bias.clone(), geometry)
-                } else {
-                    burn_conv2d(x.clone(), weight.clone(), bias.clone(), options.clone())
-                };
-                // A fixed, varied upstream gradient (the same for both runs).
-                let upstream = position_weights(y.dims(), &device);
-                let grads = (y.clone() * upstream).sum().backward();
-                (
-                    y.inner(),
-                    x.grad(&grads).expect("x gradient"),
-                    weight.grad(&grads).expect("weight gradient"),
-                    bias.map(|b| b.grad(&grads).expect("bias gradient")),
-                )
-            };
-            let (ours, theirs) = (run(true), run(false));
+            let ours = outcome([&x, &weight], &bias, |x, w, b| conv2d(x, w, b, geometry));
+            let theirs = outcome([&x, &weight], &bias, |x, w, b| {
+                burn_conv2d(x, w, b, options)
+            });
             let what = format!("{dims:?} k{kh}×{kw} s{stride} d{dilation} p{padding:?}");
-            assert_close(&format!("{what} output"), ours.0, theirs.0);
-            assert_close(&format!("{what} ∂x"), ours.1, theirs.1);
-            assert_close(&format!("{what} ∂w"), ours.2, theirs.2);
-            if let (Some(a), Some(b)) = (ours.3, theirs.3) {
-                assert_close(&format!("{what} ∂b"), a, b);
-            }
+            assert_outcomes_close(&what, ours, theirs);
         }
     }
 
@@ -618,32 +548,14 @@ mod tests {
                 [dilation; 2],
                 1,
             );
-            let run = |ours: bool| {
-                let x = x.clone().require_grad();
-                let weight = weight.clone().require_grad();
-                let bias = bias.clone().map(Tensor::require_grad);
-                let y = if ours {
-                    conv_transpose2d(x.clone(), weight.clone(), bias.clone(), geometry)
-                } else {
-                    burn_conv_transpose2d(x.clone(), weight.clone(), bias.clone(), options.clone())
-                };
-                let upstream = position_weights(y.dims(), &device);
-                let grads = (y.clone() * upstream).sum().backward();
-                (
-                    y.inner(),
-                    x.grad(&grads).expect("x gradient"),
-                    weight.grad(&grads).expect("weight gradient"),
-                    bias.map(|b| b.grad(&grads).expect("bias gradient")),
-                )
-            };
-            let (ours, theirs) = (run(true), run(false));
+            let ours = outcome([&x, &weight], &bias, |x, w, b| {
+                conv_transpose2d(x, w, b, geometry)
+            });
+            let theirs = outcome([&x, &weight], &bias, |x, w, b| {
+                burn_conv_transpose2d(x, w, b, options)
+            });
             let what = format!("{dims:?} k{k} s{stride} p{padding} o{padding_out} d{dilation}");
-            assert_close(&format!("{what} output"), ours.0, theirs.0);
-            assert_close(&format!("{what} ∂x"), ours.1, theirs.1);
-            assert_close(&format!("{what} ∂w"), ours.2, theirs.2);
-            if let (Some(a), Some(b)) = (ours.3, theirs.3) {
-                assert_close(&format!("{what} ∂b"), a, b);
-            }
+            assert_outcomes_close(&what, ours, theirs);
         }
     }
 }

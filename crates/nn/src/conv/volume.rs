@@ -14,7 +14,7 @@ use std::ops::Range;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::autodiff::NodeId;
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
@@ -25,6 +25,7 @@ use burn::tensor::Tensor;
 use rayon::prelude::*;
 
 use super::on_cpu_training;
+use crate::custom_op::{checkpoint_input_and_weight, checkpointed_step_inputs, register, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 use crate::matmul::{gemm_f32, Strided};
 
@@ -104,77 +105,81 @@ fn valid_span(
     )
 }
 
-/// For tap `t` and the output depth planes `planes`: each output line `(oz, oy)` as its offset in
-/// a band row, the offset of the input line it reads (`None` in the padding), the output columns
-/// that read inside the input and the input column of the first of them.
-fn for_each_line(
-    geometry: &Geometry3,
+/// A band of output depth planes `planes` of a convolution of `geometry` over an input of `size`
+/// (output `out`): the unit the input is unfolded (and its gradient folded back) in.
+struct Band<'a> {
+    geometry: &'a Geometry3,
     size: [usize; 3],
     out: [usize; 3],
     planes: Range<usize>,
-    tap: usize,
-    mut line: impl FnMut(usize, Option<usize>, Range<usize>, usize),
-) {
-    let [kd, kh, kw] = geometry.kernel;
-    let offset = [tap / (kh * kw), tap / kw % kh, tap % kw];
-    let spans: [_; 3] = std::array::from_fn(|a| {
-        valid_span(
-            out[a],
-            size[a],
-            offset[a],
-            geometry.stride[a],
-            geometry.padding[a],
-            geometry.dilation[a],
-        )
-    });
-    debug_assert!(offset[0] < kd);
-    let [_, h, w] = size;
-    let [_, oh, ow] = out;
-    let (columns, first_column) = spans[2].clone();
-    for (i, oz) in planes.enumerate() {
-        for oy in 0..oh {
-            let at = (i * oh + oy) * ow;
-            let z = spans[0]
-                .0
-                .contains(&oz)
-                .then(|| spans[0].1 + (oz - spans[0].0.start) * geometry.stride[0]);
-            let y = spans[1]
-                .0
-                .contains(&oy)
-                .then(|| spans[1].1 + (oy - spans[1].0.start) * geometry.stride[1]);
-            let source = z.zip(y).map(|(z, y)| (z * h + y) * w);
-            line(at, source, columns.clone(), first_column);
-        }
-    }
 }
 
-/// Rows `c·taps + t` of the unfolded input `x` (`[ci, d, h, w]`) for the output depth planes
-/// `planes`: row `(c, t)`, column `p` holds what tap `t` of channel `c` reads for output position
-/// `p` of the band (zero in the padding).
-fn unfold_band(
-    x: &[f32],
-    size: [usize; 3],
-    geometry: &Geometry3,
-    out: [usize; 3],
-    planes: Range<usize>,
-    cols: &mut [f32],
-) {
-    let taps = geometry.taps();
-    let volume = size.iter().product::<usize>();
-    let band = planes.len() * out[1] * out[2];
-    let stride = geometry.stride[2];
-    cols.par_chunks_exact_mut(band)
-        .enumerate()
-        .for_each(|(row, dst)| {
-            let src = &x[row / taps * volume..][..volume];
-            for_each_line(
-                geometry,
-                size,
-                out,
-                planes.clone(),
-                row % taps,
-                |at, source, columns, first| {
-                    let dst = &mut dst[at..][..out[2]];
+impl Band<'_> {
+    /// Output positions in the band: the length of one unfolded row.
+    fn positions(&self) -> usize {
+        self.planes.len() * self.out[1] * self.out[2]
+    }
+
+    /// For tap `t`: each output line `(oz, oy)` of the band as its offset in a band row, the
+    /// offset of the input line it reads (`None` in the padding), the output columns that read
+    /// inside the input and the input column of the first of them.
+    fn for_each_line(
+        &self,
+        tap: usize,
+        mut line: impl FnMut(usize, Option<usize>, Range<usize>, usize),
+    ) {
+        let Band {
+            geometry,
+            size,
+            out,
+            ..
+        } = *self;
+        let [kd, kh, kw] = geometry.kernel;
+        let offset = [tap / (kh * kw), tap / kw % kh, tap % kw];
+        let spans: [_; 3] = std::array::from_fn(|a| {
+            valid_span(
+                out[a],
+                size[a],
+                offset[a],
+                geometry.stride[a],
+                geometry.padding[a],
+                geometry.dilation[a],
+            )
+        });
+        debug_assert!(offset[0] < kd);
+        let [_, h, w] = size;
+        let [_, oh, ow] = out;
+        let (columns, first_column) = spans[2].clone();
+        for (i, oz) in self.planes.clone().enumerate() {
+            for oy in 0..oh {
+                let at = (i * oh + oy) * ow;
+                let z = spans[0]
+                    .0
+                    .contains(&oz)
+                    .then(|| spans[0].1 + (oz - spans[0].0.start) * geometry.stride[0]);
+                let y = spans[1]
+                    .0
+                    .contains(&oy)
+                    .then(|| spans[1].1 + (oy - spans[1].0.start) * geometry.stride[1]);
+                let source = z.zip(y).map(|(z, y)| (z * h + y) * w);
+                line(at, source, columns.clone(), first_column);
+            }
+        }
+    }
+
+    /// Rows `c·taps + t` of the unfolded input `x` (`[ci, d, h, w]`) over the band: row
+    /// `(c, t)`, column `p` holds what tap `t` of channel `c` reads for output position `p` of
+    /// the band (zero in the padding).
+    fn unfold(&self, x: &[f32], cols: &mut [f32]) {
+        let (taps, volume) = (self.geometry.taps(), self.size.iter().product::<usize>());
+        let (row_len, stride) = (self.positions(), self.geometry.stride[2]);
+        let width = self.out[2];
+        cols.par_chunks_exact_mut(row_len)
+            .enumerate()
+            .for_each(|(row, dst)| {
+                let src = &x[row / taps * volume..][..volume];
+                self.for_each_line(row % taps, |at, source, columns, first| {
+                    let dst = &mut dst[at..][..width];
                     let Some(source) = source else {
                         dst.fill(0.0);
                         return;
@@ -185,56 +190,53 @@ fn unfold_band(
                     for (k, d) in dst[columns].iter_mut().enumerate() {
                         *d = src[k * stride];
                     }
-                },
-            );
-        });
-}
+                });
+            });
+    }
 
-/// Adds the unfolded gradient `cols` (rows `c·taps + t` over the band `planes`) back onto the
-/// input positions they were read from, into `dx` (`[ci, d, h, w]`); channels in parallel.
-fn fold_band(
-    cols: &[f32],
-    size: [usize; 3],
-    geometry: &Geometry3,
-    out: [usize; 3],
-    planes: Range<usize>,
-    dx: &mut [f32],
-) {
-    let taps = geometry.taps();
-    let volume = size.iter().product::<usize>();
-    let band = planes.len() * out[1] * out[2];
-    let stride = geometry.stride[2];
-    dx.par_chunks_exact_mut(volume)
-        .zip(cols.par_chunks_exact(taps * band))
-        .for_each(|(dst, rows)| {
-            for (tap, row) in rows.chunks_exact(band).enumerate() {
-                for_each_line(
-                    geometry,
-                    size,
-                    out,
-                    planes.clone(),
-                    tap,
-                    |at, source, columns, first| {
+    /// Adds the unfolded gradient `cols` (rows `c·taps + t` over the band) back onto the input
+    /// positions they were read from, into `dx` (`[ci, d, h, w]`); channels in parallel.
+    fn fold(&self, cols: &[f32], dx: &mut [f32]) {
+        let (taps, volume) = (self.geometry.taps(), self.size.iter().product::<usize>());
+        let (row_len, stride) = (self.positions(), self.geometry.stride[2]);
+        dx.par_chunks_exact_mut(volume)
+            .zip(cols.par_chunks_exact(taps * row_len))
+            .for_each(|(dst, rows)| {
+                for (tap, row) in rows.chunks_exact(row_len).enumerate() {
+                    self.for_each_line(tap, |at, source, columns, first| {
                         let Some(source) = source else { return };
                         let dst = &mut dst[source + first..];
                         for (k, g) in row[at..][columns].iter().enumerate() {
                             dst[k * stride] += g;
                         }
-                    },
-                );
-            }
-        });
+                    });
+                }
+            });
+    }
 }
 
-/// Output depth planes per band, so that a band's unfolded input stays near [`BAND_FLOATS`].
-fn band_planes(rows: usize, out: [usize; 3]) -> usize {
-    (BAND_FLOATS / (rows * out[1] * out[2]).max(1)).clamp(1, out[0])
-}
-
-fn bands(out: [usize; 3], per_band: usize) -> impl Iterator<Item = Range<usize>> {
-    (0..out[0])
-        .step_by(per_band)
-        .map(move |z| z..(z + per_band).min(out[0]))
+/// The bands of a convolution of `geometry` over an input of `size` whose unfolding has `rows`
+/// rows, each near [`BAND_FLOATS`] unfolded, and the scratch one band unfolds into (none for a
+/// 1×1×1 convolution: its input is its own unfolding).
+fn bands(
+    geometry: &Geometry3,
+    size: [usize; 3],
+    rows: usize,
+) -> (impl Iterator<Item = Band<'_>> + Clone, Vec<f32>) {
+    let out = geometry.output(size);
+    let per_band = (BAND_FLOATS / (rows * out[1] * out[2]).max(1)).clamp(1, out[0]);
+    let scratch = if geometry.is_pointwise() {
+        0
+    } else {
+        rows * per_band * out[1] * out[2]
+    };
+    let bands = (0..out[0]).step_by(per_band).map(move |z| Band {
+        geometry,
+        size,
+        out,
+        planes: z..(z + per_band).min(out[0]),
+    });
+    (bands, vec![0.0f32; scratch])
 }
 
 /// Calls `each(n, planes, unfolded, row_stride)` for every batch item `n` of `x` (`shape`) and
@@ -248,27 +250,24 @@ fn for_each_unfolded_band(
     mut each: impl FnMut(usize, Range<usize>, &[f32], usize),
 ) {
     let [b, ci, d, h, w] = shape;
-    let size = [d, h, w];
-    let out = geometry.output(size);
-    let (volume, plane) = (d * h * w, out[1] * out[2]);
+    let volume = d * h * w;
     let k = ci * geometry.taps();
-    let per_band = band_planes(k, out);
-    let scratch = if geometry.is_pointwise() {
-        0
-    } else {
-        k * per_band * plane
-    };
-    let mut cols = vec![0.0f32; scratch];
+    let (bands, mut cols) = bands(geometry, [d, h, w], k);
     for n in 0..b {
         let x = &x[n * ci * volume..][..ci * volume];
-        for planes in bands(out, per_band) {
+        for band in bands.clone() {
             if geometry.is_pointwise() {
-                each(n, planes.clone(), &x[planes.start * plane..], volume);
+                let plane = band.out[1] * band.out[2];
+                each(
+                    n,
+                    band.planes.clone(),
+                    &x[band.planes.start * plane..],
+                    volume,
+                );
             } else {
-                let band = planes.len() * plane;
-                let cols = &mut cols[..k * band];
-                unfold_band(x, size, geometry, out, planes.clone(), cols);
-                each(n, planes, cols, band);
+                let cols = &mut cols[..k * band.positions()];
+                band.unfold(x, cols);
+                each(n, band.planes.clone(), cols, band.positions());
             }
         }
     }
@@ -325,18 +324,12 @@ pub fn conv3d_input_grad(
     assert_eq!(weight.len(), co * k, "conv3d_input_grad: weight size");
     assert_eq!(geometry.output(size), out, "conv3d_input_grad: output size");
     let mut dx = vec![0.0f32; b * ci * volume];
-    let per_band = band_planes(k, out);
     // A 1×1×1 convolution's unfolded gradient is the input gradient: the GEMM writes it in place.
-    let scratch = if geometry.is_pointwise() {
-        0
-    } else {
-        k * per_band * plane
-    };
-    let mut cols = vec![0.0f32; scratch];
+    let (bands, mut cols) = bands(geometry, size, k);
     for n in 0..b {
         let dx = &mut dx[n * ci * volume..][..ci * volume];
-        for planes in bands(out, per_band) {
-            let band = planes.len() * plane;
+        for unfolding in bands.clone() {
+            let (planes, band) = (unfolding.planes.clone(), unfolding.positions());
             let (dst, stride) = if geometry.is_pointwise() {
                 (&mut dx[planes.start * plane..], volume)
             } else {
@@ -360,7 +353,7 @@ pub fn conv3d_input_grad(
                 );
             }
             if !geometry.is_pointwise() {
-                fold_band(&cols[..k * band], size, geometry, out, planes, dx);
+                unfolding.fold(&cols[..k * band], dx);
             }
         }
     }
@@ -500,7 +493,7 @@ pub trait VolumeConvKernels: Backend {
 }
 
 /// The gradients of [`VolumeConvKernels::kernel_conv3d`].
-pub trait VolumeConvGradKernels: Backend {
+pub trait VolumeConvGradKernels: VolumeConvKernels {
     /// `∂L/∂x` for an input shaped like `x`.
     fn kernel_conv3d_x_grad(
         x: &FloatTensor<Self>,
@@ -574,26 +567,18 @@ impl VolumeConvGradKernels for Flex {
 #[derive(Debug)]
 struct Conv3dBackward;
 
-impl<B: VolumeConvKernels + VolumeConvGradKernels> Backward<B, 2> for Conv3dBackward {
-    type State = (NodeId, NodeId, Geometry3);
+impl<B: VolumeConvGradKernels> Backward<B, 2> for Conv3dBackward {
+    type State = ([NodeId; 2], Geometry3);
 
-    fn backward(
-        self,
-        ops: Ops<Self::State, 2>,
-        grads: &mut Gradients,
-        checkpointer: &mut Checkpointer,
-    ) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (x_state, weight_state, geometry) = ops.state;
-        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
-        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
-        if let Some(node) = &ops.parents[0] {
-            let dx = B::kernel_conv3d_x_grad(&x, weight, grad.clone(), geometry);
-            grads.register::<B>(node.id, dx);
-        }
-        if let Some(node) = &ops.parents[1] {
-            grads.register::<B>(node.id, B::kernel_conv3d_weight_grad(x, grad, geometry));
-        }
+    fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, saved: &mut Checkpointer) {
+        let (grad, [x, weight], geometry, [dx, dw]) =
+            checkpointed_step_inputs::<B, _, 2>(ops, grads, saved);
+        register::<B>(grads, dx, || {
+            B::kernel_conv3d_x_grad(&x, weight, grad.clone(), geometry)
+        });
+        register::<B>(grads, dw, || {
+            B::kernel_conv3d_weight_grad(x, grad, geometry)
+        });
     }
 }
 
@@ -603,54 +588,33 @@ impl<B: VolumeConvKernels + VolumeConvGradKernels> Backward<B, 2> for Conv3dBack
 #[derive(Debug)]
 struct ConvTranspose3dBackward;
 
-impl<B: VolumeConvKernels + VolumeConvGradKernels> Backward<B, 2> for ConvTranspose3dBackward {
-    type State = (NodeId, NodeId, Geometry3);
+impl<B: VolumeConvGradKernels> Backward<B, 2> for ConvTranspose3dBackward {
+    type State = ([NodeId; 2], Geometry3);
 
-    fn backward(
-        self,
-        ops: Ops<Self::State, 2>,
-        grads: &mut Gradients,
-        checkpointer: &mut Checkpointer,
-    ) {
-        let grad = grads.consume::<B>(&ops.node);
-        let (x_state, weight_state, geometry) = ops.state;
-        let x: FloatTensor<B> = checkpointer.retrieve_node_output(x_state);
-        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(weight_state);
-        if let Some(node) = &ops.parents[0] {
-            grads.register::<B>(node.id, B::kernel_conv3d(grad.clone(), weight, geometry));
-        }
-        if let Some(node) = &ops.parents[1] {
-            grads.register::<B>(node.id, B::kernel_conv3d_weight_grad(grad, x, geometry));
-        }
+    fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, saved: &mut Checkpointer) {
+        let (grad, [x, weight], geometry, [dx, dw]) =
+            checkpointed_step_inputs::<B, _, 2>(ops, grads, saved);
+        register::<B>(grads, dx, || {
+            B::kernel_conv3d(grad.clone(), weight, geometry)
+        });
+        register::<B>(grads, dw, || {
+            B::kernel_conv3d_weight_grad(grad, x, geometry)
+        });
     }
 }
 
-impl<B, C> VolumeConvKernels for Autodiff<B, C>
-where
-    B: VolumeConvKernels + VolumeConvGradKernels,
-    C: CheckpointStrategy,
-{
+impl<B: VolumeConvGradKernels, C: CheckpointStrategy> VolumeConvKernels for Autodiff<B, C> {
     fn kernel_conv3d(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
         geometry: Geometry3,
     ) -> FloatTensor<Self> {
-        match Conv3dBackward
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&x), prep.checkpoint(&weight), geometry);
-                let out = B::kernel_conv3d(x.into_primitive(), weight.into_primitive(), geometry);
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv3d(
-                x.into_primitive(),
-                weight.into_primitive(),
-                geometry,
-            )),
-        }
+        Conv3dBackward.record::<C, _>(
+            [x, weight],
+            geometry,
+            checkpoint_input_and_weight,
+            |[x, weight], geometry| B::kernel_conv3d(x, weight, geometry),
+        )
     }
 
     fn kernel_conv_transpose3d(
@@ -659,28 +623,12 @@ where
         geometry: Geometry3,
         padding_out: [usize; 3],
     ) -> FloatTensor<Self> {
-        match ConvTranspose3dBackward
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&x), prep.checkpoint(&weight), geometry);
-                let out = B::kernel_conv_transpose3d(
-                    x.into_primitive(),
-                    weight.into_primitive(),
-                    geometry,
-                    padding_out,
-                );
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::kernel_conv_transpose3d(
-                x.into_primitive(),
-                weight.into_primitive(),
-                geometry,
-                padding_out,
-            )),
-        }
+        ConvTranspose3dBackward.record::<C, _>(
+            [x, weight],
+            geometry,
+            checkpoint_input_and_weight,
+            |[x, weight], geometry| B::kernel_conv_transpose3d(x, weight, geometry, padding_out),
+        )
     }
 }
 
@@ -690,7 +638,7 @@ mod tests {
     use burn::nn::conv::{Conv3dConfig, ConvTranspose3dConfig};
     use burn::tensor::{Device, Distribution};
 
-    use crate::test_support::{assert_close, position_weights};
+    use crate::test_support::{assert_close, position_weighted_grads};
 
     use super::*;
 
@@ -704,8 +652,7 @@ mod tests {
     ) -> [Tensor<5>; 3] {
         let x = x.clone().require_grad();
         let y = forward(layer, x.clone());
-        let upstream = position_weights(y.dims(), &y.device());
-        let grads = (y.clone() * upstream).sum().backward();
+        let grads = position_weighted_grads(&y);
         [
             y.inner(),
             x.grad(&grads).expect("x gradient"),
