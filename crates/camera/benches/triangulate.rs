@@ -9,18 +9,8 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use raster::formats::read_tiff;
 use raster::{Homography, Image, Mask};
 
-fn anchor(rel: &str) -> PathBuf {
-    let p = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/anchors/data/"
-    ))
-    .join(rel);
-    assert!(p.exists(), "anchor data {} is missing", p.display());
-    p
-}
-
-fn matrix(rel: &str) -> Homography {
-    let v: Vec<f64> = std::fs::read_to_string(anchor(rel))
+fn matrix(path: PathBuf) -> Homography {
+    let v: Vec<f64> = std::fs::read_to_string(path)
         .unwrap()
         .split_whitespace()
         .map(|t| t.parse().unwrap())
@@ -29,14 +19,15 @@ fn matrix(rel: &str) -> Homography {
 }
 
 fn bench(c: &mut Criterion) {
-    let dir = "s2p/tests/data/input_triangulation/";
-    let rpc_l = RpcModel::read_geotiff_rpc(anchor("s2p/tests/data/input_pair/img_01.tif")).unwrap();
-    let rpc_r = RpcModel::read_geotiff_rpc(anchor("s2p/tests/data/input_pair/img_02.tif")).unwrap();
-    let a = matrix(&format!("{dir}global_pointing_pair_1.txt"));
-    let h_l = matrix(&format!("{dir}pair_1/H_ref.txt"));
-    let h_r = matrix(&format!("{dir}pair_1/H_sec.txt")).compose(&a.inverse().unwrap());
+    let data = testdata::require!("anchors/data/s2p").join("tests/data");
+    let dir = data.join("input_triangulation");
+    let rpc_l = RpcModel::read_geotiff_rpc(data.join("input_pair/img_01.tif")).unwrap();
+    let rpc_r = RpcModel::read_geotiff_rpc(data.join("input_pair/img_02.tif")).unwrap();
+    let a = matrix(dir.join("global_pointing_pair_1.txt"));
+    let h_l = matrix(dir.join("pair_1/H_ref.txt"));
+    let h_r = matrix(dir.join("pair_1/H_sec.txt")).compose(&a.inverse().unwrap());
     // s2p's disparity is x_sec − x_ref; ours is x_ref − x_sec.
-    let s2p = read_tiff(anchor(&format!("{dir}pair_1/rectified_disp.tif")))
+    let s2p = read_tiff(dir.join("pair_1/rectified_disp.tif"))
         .unwrap()
         .image;
     let finite: Vec<f64> = s2p

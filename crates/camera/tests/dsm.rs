@@ -5,12 +5,12 @@ mod support;
 use camera::{rasterize_max, write_dsm, CameraError, DsmGrid, Points, UtmZone};
 use raster::formats::{read_tiff, GeoRaster, GeoReference};
 use raster::Image;
-use support::anchor;
+use support::{s2p, S2P};
 
 #[test]
 fn grid_of_the_s2p_dsm() {
-    let grid =
-        DsmGrid::read_geotiff(anchor("s2p/tests/data/expected_output/pair/dsm.tif")).unwrap();
+    testdata::require!(S2P);
+    let grid = DsmGrid::read_geotiff(s2p("tests/data/expected_output/pair/dsm.tif")).unwrap();
     assert_eq!((grid.width, grid.height, grid.epsg), (721, 739, 32740));
     assert_eq!(grid.resolution, 0.5);
     assert_eq!(grid.zone(), UtmZone::from_epsg(32740).unwrap());
@@ -99,7 +99,8 @@ fn unusable_georeferences_are_errors() {
     assert!(DsmGrid::from_georeference(&geographic, 3, 3).is_err());
 
     // A real TIFF without georeference: a satellite image.
-    let msg = DsmGrid::read_geotiff(anchor(support::S2P_IMG1))
+    testdata::require!(S2P);
+    let msg = DsmGrid::read_geotiff(s2p(support::S2P_IMG1))
         .unwrap_err()
         .to_string();
     assert!(
@@ -110,6 +111,7 @@ fn unusable_georeferences_are_errors() {
 
 #[test]
 fn dfc2019_truth_as_distributed_reads_with_its_txt_georeference() {
+    testdata::require!(support::JAX_DEV);
     let path = support::jax_dev("truth/JAX_068_DSM.tif");
     // The plain TIFF carries no georeference: the zone must come from somewhere.
     let msg = camera::read_dsm(&path, None).unwrap_err().to_string();

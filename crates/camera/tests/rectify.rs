@@ -380,12 +380,12 @@ fn rectified_synthetic_pair_matches_to_the_true_disparity() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The s2p Pléiades pair, read in place from the shared anchors.
+// The s2p Pléiades pair, read in place from s2p's test data.
 
-const S2P: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/anchors/data/s2p/tests/data"
-);
+/// The `tests/data` folder of s2p's test data, or None (the test skips) where it is absent.
+fn s2p_data() -> Option<std::path::PathBuf> {
+    testdata::dataset("anchors/data/s2p").map(|dir| dir.join("tests/data"))
+}
 
 /// s2p's region of interest for this pair (tests/data/input_pair/config.json).
 const S2P_ROI: Roi = Roi {
@@ -400,14 +400,9 @@ const S2P_ROI: Roi = Roi {
 /// search.
 const S2P_ALT: (f64, f64) = (2200.0, 2450.0);
 
-fn s2p_pair() -> Option<(raster::formats::GeoRaster, raster::formats::GeoRaster)> {
-    let dir = std::path::Path::new(S2P);
-    if !dir.exists() {
-        eprintln!("skipping: {S2P} is not there");
-        return None;
-    }
+fn s2p_pair(dir: &std::path::Path) -> (raster::formats::GeoRaster, raster::formats::GeoRaster) {
     let read = |name: &str| raster::formats::read_tiff(dir.join("input_pair").join(name)).unwrap();
-    Some((read("img_01.tif"), read("img_02.tif")))
+    (read("img_01.tif"), read("img_02.tif"))
 }
 
 #[test]
@@ -415,9 +410,10 @@ fn s2p_pair_rectified_from_rpcs_matches_the_s2p_dsm() {
     use camera::{evaluation_mask, rasterize_max, triangulate_disparity, DsmGrid, RpcModel};
     use std::time::Instant;
 
-    let Some((left, right)) = s2p_pair() else {
+    let Some(s2p) = s2p_data() else {
         return;
     };
+    let (left, right) = s2p_pair(&s2p);
     let rpc_l = RpcModel::from_tiff_tag(left.rpc.as_ref().unwrap()).unwrap();
     let rpc_r = RpcModel::from_tiff_tag(right.rpc.as_ref().unwrap()).unwrap();
 
@@ -474,7 +470,7 @@ fn s2p_pair_rectified_from_rpcs_matches_the_s2p_dsm() {
         &mask,
     )
     .unwrap();
-    let expected_path = std::path::Path::new(S2P).join("expected_output/pair/dsm.tif");
+    let expected_path = s2p.join("expected_output/pair/dsm.tif");
     let expected = raster::formats::read_tiff(&expected_path).unwrap();
     let grid = DsmGrid::of_raster(&expected, "s2p dsm.tif").unwrap();
     let dsm = rasterize_max(&points, &grid);

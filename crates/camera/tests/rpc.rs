@@ -4,7 +4,7 @@
 mod support;
 
 use camera::{CameraError, RpcModel};
-use support::{anchor, JAX_JSON, S2P_IMG1, S2P_IMG2};
+use support::{rpcm, s2p, JAX_JSON, RPCM, S2P, S2P_IMG1, S2P_IMG2};
 
 /// Largest |projection(localization(x, alt), alt) − x| over a grid of image points and
 /// altitudes, in pixels.
@@ -35,7 +35,8 @@ fn round_trip_error(rpc: &RpcModel, width: f64, height: f64, alts: &[f64]) -> f6
 
 #[test]
 fn satnerf_json_projection_matches_reference() {
-    let rpc = RpcModel::read_rpcm_json(anchor(JAX_JSON)).unwrap();
+    testdata::require!(RPCM);
+    let rpc = RpcModel::read_rpcm_json(rpcm(JAX_JSON)).unwrap();
     assert_eq!((rpc.min_alt, rpc.max_alt), (Some(-27.0), Some(30.0)));
     assert_eq!(rpc.altitude_range(), (-522.0, 480.0));
     // Reference values: rpcm's `apply_poly`/`apply_rfm` formulas evaluated with numpy in float64
@@ -51,7 +52,8 @@ fn satnerf_json_projection_matches_reference() {
 
 #[test]
 fn satnerf_json_round_trip() {
-    let rpc = RpcModel::read_rpcm_json(anchor(JAX_JSON)).unwrap();
+    testdata::require!(RPCM);
+    let rpc = RpcModel::read_rpcm_json(rpcm(JAX_JSON)).unwrap();
     let err = round_trip_error(&rpc, 746.0, 815.0, &[-27.0, 0.0, 30.0, 100.0]);
     println!("JAX_068_001 round trip: max error {err:.3e} px");
     assert!(err < 1e-3, "{err}");
@@ -59,6 +61,7 @@ fn satnerf_json_round_trip() {
 
 #[test]
 fn geotiff_tag_projection_matches_reference() {
+    testdata::require!(S2P);
     // Reference values: RPC00B formulas in numpy on the tag read with PIL.
     let cases = [
         (
@@ -88,7 +91,7 @@ fn geotiff_tag_projection_matches_reference() {
         (S2P_IMG2, 55.65, -21.23, 250.0, 65.152715939, 858.378533706),
     ];
     for (file, lon, lat, alt, col, row) in cases {
-        let rpc = RpcModel::read_geotiff_rpc(anchor(file)).unwrap();
+        let rpc = RpcModel::read_geotiff_rpc(s2p(file)).unwrap();
         let (c, r) = rpc.projection(lon, lat, alt);
         assert!(
             (c - col).abs() < 1e-6 && (r - row).abs() < 1e-6,
@@ -99,8 +102,9 @@ fn geotiff_tag_projection_matches_reference() {
 
 #[test]
 fn geotiff_tag_round_trip() {
+    testdata::require!(S2P);
     for (file, w, h) in [(S2P_IMG1, 1024.0, 1024.0), (S2P_IMG2, 1031.0, 1102.0)] {
-        let rpc = RpcModel::read_geotiff_rpc(anchor(file)).unwrap();
+        let rpc = RpcModel::read_geotiff_rpc(s2p(file)).unwrap();
         let err = round_trip_error(&rpc, w, h, &[0.0, 150.0, 400.0, 900.0]);
         println!("{file} round trip: max error {err:.3e} px");
         assert!(err < 1e-3, "{file}: {err}");
@@ -109,7 +113,8 @@ fn geotiff_tag_round_trip() {
 
 #[test]
 fn bare_rpc_dict_is_accepted() {
-    let text = std::fs::read_to_string(anchor(JAX_JSON)).unwrap();
+    testdata::require!(RPCM);
+    let text = std::fs::read_to_string(rpcm(JAX_JSON)).unwrap();
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     let full = RpcModel::from_rpcm_json(&v).unwrap();
     let bare = RpcModel::from_rpcm_json(&v["rpc"]).unwrap();
@@ -133,7 +138,8 @@ fn rpc_error(v: &serde_json::Value) -> String {
 
 #[test]
 fn malformed_json_names_file_and_key() {
-    let text = std::fs::read_to_string(anchor(JAX_JSON)).unwrap();
+    testdata::require!(RPCM);
+    let text = std::fs::read_to_string(rpcm(JAX_JSON)).unwrap();
     let good: serde_json::Value = serde_json::from_str(&text).unwrap();
 
     let mut v = good.clone();
@@ -166,7 +172,8 @@ fn malformed_json_names_file_and_key() {
 
 #[test]
 fn tiff_without_rpc_is_an_error() {
-    let msg = RpcModel::read_geotiff_rpc(anchor("s2p/tests/data/expected_output/pair/dsm.tif"))
+    testdata::require!(S2P);
+    let msg = RpcModel::read_geotiff_rpc(s2p("tests/data/expected_output/pair/dsm.tif"))
         .unwrap_err()
         .to_string();
     assert!(msg.contains("dsm.tif") && msg.contains("RPC"), "{msg}");

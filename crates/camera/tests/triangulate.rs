@@ -6,10 +6,10 @@ mod support;
 use camera::{altitude, evaluation_mask, rasterize_max, triangulate_disparity, DsmGrid, RpcModel};
 use raster::formats::{read_png, read_tiff};
 use raster::{Homography, Image, Mask};
-use support::{anchor, S2P_IMG1, S2P_IMG2};
+use support::{s2p, S2P, S2P_IMG1, S2P_IMG2};
 
 fn read_matrix(rel: &str) -> Homography {
-    let text = std::fs::read_to_string(anchor(rel)).unwrap();
+    let text = std::fs::read_to_string(s2p(rel)).unwrap();
     let v: Vec<f64> = text
         .split_whitespace()
         .map(|t| t.parse().unwrap())
@@ -18,7 +18,7 @@ fn read_matrix(rel: &str) -> Homography {
     Homography([[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]])
 }
 
-const PAIR: &str = "s2p/tests/data/input_triangulation/pair_1/";
+const PAIR: &str = "tests/data/input_triangulation/pair_1/";
 
 /// s2p's tile in our convention: disparity negated (s2p: x_sec = x_ref + d; ours x_R = x_L − d),
 /// secondary homography H_sec·A⁻¹ with the pointing correction A.
@@ -32,22 +32,22 @@ struct S2pTile {
 }
 
 fn s2p_tile() -> S2pTile {
-    let disp = read_tiff(anchor(&format!("{PAIR}rectified_disp.tif")))
+    let disp = read_tiff(s2p(&format!("{PAIR}rectified_disp.tif")))
         .unwrap()
         .image;
-    let m = read_png(anchor(&format!("{PAIR}rectified_mask.png"))).unwrap();
+    let m = read_png(s2p(&format!("{PAIR}rectified_mask.png"))).unwrap();
     assert_eq!(disp.size(), m.size());
     let mask = Mask::from_fn(m.width(), m.height(), |x, y| m.get(x, y, 0) > 0.0);
     let data = disp.data().iter().map(|d| -d).collect();
     let disparity = Image::new(disp.width(), disp.height(), 1, data).unwrap();
-    let a = read_matrix("s2p/tests/data/input_triangulation/global_pointing_pair_1.txt");
+    let a = read_matrix("tests/data/input_triangulation/global_pointing_pair_1.txt");
     S2pTile {
         disparity,
         mask,
         h_ref: read_matrix(&format!("{PAIR}H_ref.txt")),
         h_sec: read_matrix(&format!("{PAIR}H_sec.txt")).compose(&a.inverse().unwrap()),
-        rpc_ref: RpcModel::read_geotiff_rpc(anchor(S2P_IMG1)).unwrap(),
-        rpc_sec: RpcModel::read_geotiff_rpc(anchor(S2P_IMG2)).unwrap(),
+        rpc_ref: RpcModel::read_geotiff_rpc(s2p(S2P_IMG1)).unwrap(),
+        rpc_sec: RpcModel::read_geotiff_rpc(s2p(S2P_IMG2)).unwrap(),
     }
 }
 
@@ -58,6 +58,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 #[test]
 fn s2p_tile_dsm_matches_s2p() {
+    testdata::require!(S2P);
     let t = s2p_tile();
     let points = triangulate_disparity(
         &t.disparity,
@@ -71,7 +72,7 @@ fn s2p_tile_dsm_matches_s2p() {
     let valid = points.valid_count();
     assert!(valid > 50_000, "only {valid} points");
 
-    let gt_path = anchor("s2p/tests/data/expected_output/pair/dsm.tif");
+    let gt_path = s2p("tests/data/expected_output/pair/dsm.tif");
     let gt = read_tiff(&gt_path).unwrap();
     let grid = DsmGrid::of_raster(&gt, "dsm.tif").unwrap();
     assert_eq!((grid.epsg, grid.resolution), (32740, 0.5));
@@ -124,6 +125,7 @@ fn exact_altitude(left: &RpcModel, right: &RpcModel, xl: (f64, f64), xr: (f64, f
 
 #[test]
 fn fast_triangulation_equals_the_plain_scheme() {
+    testdata::require!(S2P);
     let t = s2p_tile();
     let inv_ref = t.h_ref.inverse().unwrap();
     let inv_sec = t.h_sec.inverse().unwrap();
@@ -231,7 +233,8 @@ fn world_altitudes_are_exact() {
 
 #[test]
 fn input_errors_are_clear() {
-    let rpc = RpcModel::read_geotiff_rpc(anchor(S2P_IMG1)).unwrap();
+    testdata::require!(S2P);
+    let rpc = RpcModel::read_geotiff_rpc(s2p(S2P_IMG1)).unwrap();
     let d = Image::filled(8, 6, 1, 1.0);
     let msg = triangulate_disparity(
         &d,
