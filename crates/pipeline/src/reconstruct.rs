@@ -11,14 +11,14 @@
 //! finished tiles, retries failed ones, and `--shard I/N` runs the tiles ≡ I mod N, the DSM being
 //! assembled once every tile has a record (by the last shard, or a final merge-only run).
 
+pub mod folder;
 pub mod mosaic;
 pub mod plan;
 pub mod raw;
 pub mod tile;
+pub mod workers;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -34,10 +34,12 @@ use crate::matcher::Matcher;
 use crate::progress::Progress;
 use crate::rectify::{altitude_range, camera_of, file_stem};
 use crate::stage::write_json;
-use mosaic::{read_part, write_part, Mosaic};
+use folder::TileFolder;
+use mosaic::Mosaic;
 use plan::{plan_tiles, Tile};
 use raw::RawImage;
 use tile::{run_tile, tile_memory, tile_rectification, Scene, TileRecord, TileStatus};
+use workers::run_on_workers;
 
 /// What to reconstruct and how.
 #[derive(Clone, Debug)]
@@ -199,17 +201,87 @@ pub fn reconstruct(
     opts: &ReconstructOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
-    if opts.tile < 64 {
-        bail!(
-            "--tile {} is too small: tiles need at least 64 pixels",
-            opts.tile
-        );
-    }
+    check_tile_side(opts.tile)?;
     let work = opts
         .work_dir
         .clone()
         .unwrap_or_else(|| default_work_dir(&opts.output));
+    let pair = open_pair(opts)?;
+    let (w, h) = pair.left.size();
+    let roi = region_of_interest(opts, &pair.rpc_left, pair.alt_range, (w, h))?;
+    let stem = format!("{}-{}", file_stem(&opts.left)?, file_stem(&opts.right)?);
+    let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
+    let grid = scene_grid(&opts.grid, &pair.rpc_left, roi, pair.alt_range)?;
+    let merge_memory = merge_memory(&grid, opts.max_memory)?;
+    claim_work_folder(&work, &scene_settings(opts, roi, pair.alt_range, &grid))?;
+    let folder = TileFolder::new(&work);
     let mut seconds = Vec::new();
+    let run = if opts.merge_only {
+        TilesRun::default()
+    } else {
+        let t = Instant::now();
+        let scene = pair.scene(opts, &grid, &work, &stem, tiles.len() == 1);
+        let run = run_tiles(opts, &scene, &tiles, &folder, progress)?;
+        seconds.push(("tiles", t.elapsed().as_secs_f64()));
+        run
+    };
+    let (records, missing) = folder.records(&tiles);
+    let mut summary = ReconstructSummary {
+        stem,
+        work: work.clone(),
+        records,
+        ran: run.ran,
+        missing,
+        in_flight: run.in_flight,
+        tile_memory: run.largest,
+        merge_memory,
+        dsm: None,
+        scores: None,
+        seconds,
+    };
+    if !summary.missing.is_empty() {
+        if opts.merge_only {
+            bail!(
+                "{} of {} tiles have no record in {} (first: {}): run the missing shards first",
+                summary.missing.len(),
+                tiles.len(),
+                folder.dir().display(),
+                summary.missing[0]
+            );
+        }
+        return Ok(summary);
+    }
+    let t = Instant::now();
+    summary.dsm = Some(merge_tiles(opts, &grid, &folder, &summary.records)?);
+    summary.seconds.push(("merge", t.elapsed().as_secs_f64()));
+    if let Some(truth) = &opts.truth {
+        summary.scores = Some(score_against_truth(&opts.output, truth, &grid)?);
+    }
+    Ok(summary)
+}
+
+/// A tile's collar and the matcher's windows need room: below 64 pixels a tile is mostly
+/// border.
+fn check_tile_side(tile: usize) -> Result<()> {
+    if tile < 64 {
+        bail!("--tile {tile} is too small: tiles need at least 64 pixels");
+    }
+    Ok(())
+}
+
+/// The raw pair as the tiles read it: the images by windows, their cameras and the scene's
+/// altitude range.
+struct OpenPair {
+    left: RawImage,
+    right: RawImage,
+    rpc_left: RpcModel,
+    rpc_right: RpcModel,
+    alt_range: (f64, f64),
+    alt_source: &'static str,
+}
+
+/// Opens both raw images and their cameras (the RPC tags or the JSON files).
+fn open_pair(opts: &ReconstructOptions) -> Result<OpenPair> {
     let left = RawImage::open(&opts.left, "left")?;
     let right = RawImage::open(&opts.right, "right")?;
     let rpc_left = camera_of(
@@ -225,20 +297,73 @@ pub fn reconstruct(
         "right",
     )?;
     let (alt_range, alt_source) = altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
-    let (w, h) = left.size();
+    Ok(OpenPair {
+        left,
+        right,
+        rpc_left,
+        rpc_right,
+        alt_range,
+        alt_source,
+    })
+}
+
+impl OpenPair {
+    /// What every tile of this run shares.
+    fn scene<'a>(
+        &'a self,
+        opts: &'a ReconstructOptions,
+        grid: &'a DsmGrid,
+        work: &'a Path,
+        stem: &'a str,
+        single_tile: bool,
+    ) -> Scene<'a> {
+        Scene {
+            left: &self.left,
+            right: &self.right,
+            rpc_left: &self.rpc_left,
+            rpc_right: &self.rpc_right,
+            rpc_files: [opts.rpc_left.as_deref(), opts.rpc_right.as_deref()],
+            alt_range: self.alt_range,
+            alt_source: self.alt_source,
+            matcher: &opts.matcher,
+            grid,
+            gridding: opts.gridding,
+            border: opts.border,
+            keep: opts.keep_intermediates.then_some(work),
+            stem,
+            single_tile,
+        }
+    }
+}
+
+/// The region of the left raw image to reconstruct: given in pixels, in lon/lat, or the whole
+/// image.
+fn region_of_interest(
+    opts: &ReconstructOptions,
+    rpc_left: &RpcModel,
+    alt_range: (f64, f64),
+    (w, h): (usize, usize),
+) -> Result<Roi> {
     let roi = match (opts.roi, opts.roi_lonlat) {
         (Some(_), Some(_)) => bail!("give the region in pixels or in lon/lat, not both"),
         (Some(roi), None) => roi,
-        (None, Some(b)) => lonlat_roi(&rpc_left, b, alt_range, (w, h))
+        (None, Some(b)) => lonlat_roi(rpc_left, b, alt_range, (w, h))
             .with_context(|| format!("the lon/lat region in {}", opts.left.display()))?,
         (None, None) => Roi::full(w, h),
     };
     roi.check_inside(w, h)
         .with_context(|| format!("the region of interest of {}", opts.left.display()))?;
-    let stem = format!("{}-{}", file_stem(&opts.left)?, file_stem(&opts.right)?);
-    let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
-    let grid = scene_grid(&opts.grid, &rpc_left, roi, alt_range)?;
-    let settings = SceneSettings {
+    Ok(roi)
+}
+
+/// The settings a work folder's tiles depend on.
+fn scene_settings(
+    opts: &ReconstructOptions,
+    roi: Roi,
+    alt_range: (f64, f64),
+    grid: &DsmGrid,
+) -> SceneSettings {
+    SceneSettings {
         left: opts.left.clone(),
         right: opts.right.clone(),
         roi,
@@ -256,207 +381,179 @@ pub fn reconstruct(
         gridding: format!("{:?}", opts.gridding).to_lowercase(),
         matcher: opts.matcher.describe(),
         border: opts.border,
-    };
-    // The tiles stay inside the budget by construction; the assembly holds the whole grid.
+    }
+}
+
+/// Memory the assembly needs, checked against the budget before any tile runs: the tiles stay
+/// inside the budget by construction, but the assembly holds the whole grid.
+fn merge_memory(grid: &DsmGrid, max_memory: u64) -> Result<u64> {
     let merge_memory = (grid.width * grid.height) as u64 * MERGE_BYTES_PER_CELL;
-    if merge_memory > opts.max_memory {
+    if merge_memory > max_memory {
         bail!(
             "assembling the {}x{}-cell DSM needs about {:.2} GiB, more than --max-memory {:.2} \
              GiB: use a coarser --resolution, a smaller --roi, or raise --max-memory",
             grid.width,
             grid.height,
             gib(merge_memory),
-            gib(opts.max_memory)
+            gib(max_memory)
         );
     }
-    claim_work_folder(&work, &settings)?;
-    let tiles_dir = work.join("tiles");
-    let record_path = |t: &Tile| tiles_dir.join(format!("{}.json", t.id));
-    let part_path = |t: &Tile| tiles_dir.join(format!("{}.tif", t.id));
-    // A tile's record, if it has one for this plan.
-    let record_of = |t: &Tile| -> Option<TileRecord> {
-        let text = std::fs::read_to_string(record_path(t)).ok()?;
-        serde_json::from_str::<TileRecord>(&text)
-            .ok()
-            .filter(|r| r.tile == *t)
-    };
+    Ok(merge_memory)
+}
 
-    let mut ran = 0;
-    let mut in_flight = 0;
-    let mut largest = 0;
-    if !opts.merge_only {
-        let todo: Vec<&Tile> = tiles
-            .iter()
-            .filter(|t| {
-                opts.shard.contains(t.index)
-                    && record_of(t).is_none_or(|r| r.status == TileStatus::Failed)
-            })
-            .collect();
-        // Held by the process besides the tiles (images' headers, records, thread stacks).
-        let base = 256 << 20;
-        let matcher = &opts.matcher;
-        // The network cuts a tile into strips of rows to stay within the budget.
-        #[cfg(feature = "network")]
-        if let Matcher::Network(n) = matcher {
-            n.limit_memory(opts.max_memory.saturating_sub(2 * base));
-        }
-        let scene = Scene {
-            left: &left,
-            right: &right,
-            rpc_left: &rpc_left,
-            rpc_right: &rpc_right,
-            rpc_files: [opts.rpc_left.as_deref(), opts.rpc_right.as_deref()],
-            alt_range,
-            alt_source,
-            matcher,
-            grid: &grid,
-            gridding: opts.gridding,
-            border: opts.border,
-            keep: opts.keep_intermediates.then_some(work.as_path()),
-            stem: &stem,
-            single_tile: tiles.len() == 1,
-        };
-        let t = Instant::now();
-        let rects: Vec<Result<Rectification>> = todo
-            .par_iter()
-            .map(|t| tile_rectification(&scene, t))
-            .collect();
-        let bands = left.bands().max(1);
-        let memory: Vec<u64> = todo
-            .iter()
-            .zip(&rects)
-            .map(|(t, r)| r.as_ref().map_or(0, |r| tile_memory(r, t, bands, matcher)))
-            .collect();
-        largest = memory.iter().copied().max().unwrap_or(0);
-        if !todo.is_empty() && largest + base > opts.max_memory {
-            bail!(
-                "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
-                 --max-memory {:.2} GiB: use a smaller --tile (now {} px) or a narrower \
-                 --alt-range (disparity range {:?} px)",
-                gib(largest),
-                gib(base),
-                gib(opts.max_memory),
-                opts.tile,
-                todo.iter()
-                    .zip(&rects)
-                    .zip(&memory)
-                    .max_by_key(|(_, m)| **m)
-                    .and_then(|((_, r), _)| r.as_ref().ok().map(|r| r.disparity_range))
-            );
-        }
-        let threads = rayon::current_num_threads().max(1);
-        in_flight = if matcher.one_at_a_time() {
-            1
-        } else {
-            (((opts.max_memory - base) / largest.max(1)) as usize)
-                .clamp(1, threads.min(todo.len().max(1)))
-        };
-        progress.begin(&format!("tiles ({in_flight} at once)"), todo.len());
-        let next = AtomicUsize::new(0);
-        let done = AtomicUsize::new(0);
-        let failure: Mutex<Option<anyhow::Error>> = Mutex::new(None);
-        let worker = || loop {
-            if failure.lock().map_or(true, |f| f.is_some()) {
-                return;
-            }
-            let i = next.fetch_add(1, Ordering::SeqCst);
-            let Some(tile) = todo.get(i) else { return };
+/// Held by the process besides the tiles (images' headers, records, thread stacks), bytes.
+const PROCESS_BYTES: u64 = 256 << 20;
+
+/// What running the tiles did.
+#[derive(Default)]
+struct TilesRun {
+    /// Tiles run.
+    ran: usize,
+    /// Tiles run at once.
+    in_flight: usize,
+    /// The largest tile's estimated memory, bytes.
+    largest: u64,
+}
+
+/// Runs this shard's unfinished tiles, as many at once as the memory budget allows, saving each
+/// one's record and cells as it ends.
+fn run_tiles(
+    opts: &ReconstructOptions,
+    scene: &Scene,
+    tiles: &[Tile],
+    folder: &TileFolder,
+    progress: &dyn Progress,
+) -> Result<TilesRun> {
+    let todo: Vec<&Tile> = tiles
+        .iter()
+        .filter(|t| {
+            opts.shard.contains(t.index)
+                && folder
+                    .record(t)
+                    .is_none_or(|r| r.status == TileStatus::Failed)
+        })
+        .collect();
+    // The network cuts a tile into strips of rows to stay within the budget.
+    #[cfg(feature = "network")]
+    if let Matcher::Network(n) = &opts.matcher {
+        n.limit_memory(opts.max_memory.saturating_sub(2 * PROCESS_BYTES));
+    }
+    let rects: Vec<Result<Rectification>> = todo
+        .par_iter()
+        .map(|t| tile_rectification(scene, t))
+        .collect();
+    let bands = scene.left.bands().max(1);
+    let memory: Vec<u64> = todo
+        .iter()
+        .zip(&rects)
+        .map(|(t, r)| {
+            r.as_ref()
+                .map_or(0, |r| tile_memory(r, t, bands, scene.matcher))
+        })
+        .collect();
+    let largest = check_tile_memory(opts, &rects, &memory)?;
+    let in_flight = tiles_at_once(scene.matcher, opts.max_memory, largest, todo.len());
+    progress.begin(&format!("tiles ({in_flight} at once)"), todo.len());
+    let ran = run_on_workers(
+        &todo,
+        in_flight,
+        |i, tile| {
             let (record, cells) = match &rects[i] {
-                Ok(rect) => run_tile(&scene, tile, rect, memory[i]),
+                Ok(rect) => run_tile(scene, tile, rect, memory[i]),
                 Err(e) => (TileRecord::failed(tile, e), None),
             };
-            let saved = (|| -> Result<()> {
-                if let Some(cells) = &cells {
-                    write_part(&part_path(tile), cells)?;
-                }
-                write_json(&record_path(tile), &serde_json::to_value(&record)?)
-            })();
-            if let Err(e) = saved {
-                if let Ok(mut f) = failure.lock() {
-                    f.get_or_insert(e);
-                }
-                return;
-            }
-            progress.advance(done.fetch_add(1, Ordering::SeqCst) + 1);
-        };
-        std::thread::scope(|s| {
-            for _ in 0..in_flight {
-                s.spawn(worker);
-            }
-        });
-        progress.end();
-        if let Some(e) = failure.into_inner().ok().flatten() {
-            return Err(e.context(format!(
-                "saving a tile record under {}",
-                tiles_dir.display()
-            )));
-        }
-        ran = done.into_inner();
-        seconds.push(("tiles", t.elapsed().as_secs_f64()));
-    }
-
-    let mut records = Vec::with_capacity(tiles.len());
-    let mut missing = Vec::new();
-    for t in &tiles {
-        match record_of(t) {
-            Some(r) => records.push(r),
-            None => missing.push(t.id.clone()),
-        }
-    }
-    let mut summary = ReconstructSummary {
-        stem,
-        work: work.clone(),
-        records,
+            folder.save(tile, &record, cells.as_ref())
+        },
+        progress,
+    );
+    progress.end();
+    let ran = ran.map_err(|e| {
+        e.context(format!(
+            "saving a tile record under {}",
+            folder.dir().display()
+        ))
+    })?;
+    Ok(TilesRun {
         ran,
-        missing,
         in_flight,
-        tile_memory: largest,
-        merge_memory,
-        dsm: None,
-        scores: None,
-        seconds,
-    };
-    if !summary.missing.is_empty() {
-        if opts.merge_only {
-            bail!(
-                "{} of {} tiles have no record in {} (first: {}): run the missing shards first",
-                summary.missing.len(),
-                tiles.len(),
-                tiles_dir.display(),
-                summary.missing[0]
-            );
-        }
-        return Ok(summary);
-    }
+        largest,
+    })
+}
 
-    let t = Instant::now();
-    let mut mosaic = Mosaic::new(&grid, opts.gridding);
+/// The largest tile's estimated memory, refused when even that one tile does not fit in the
+/// budget.
+fn check_tile_memory(
+    opts: &ReconstructOptions,
+    rects: &[Result<Rectification>],
+    memory: &[u64],
+) -> Result<u64> {
+    let largest = memory.iter().copied().max().unwrap_or(0);
+    if !memory.is_empty() && largest + PROCESS_BYTES > opts.max_memory {
+        bail!(
+            "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
+             --max-memory {:.2} GiB: use a smaller --tile (now {} px) or a narrower \
+             --alt-range (disparity range {:?} px)",
+            gib(largest),
+            gib(PROCESS_BYTES),
+            gib(opts.max_memory),
+            opts.tile,
+            rects
+                .iter()
+                .zip(memory)
+                .max_by_key(|(_, m)| **m)
+                .and_then(|(r, _)| r.as_ref().ok().map(|r| r.disparity_range))
+        );
+    }
+    Ok(largest)
+}
+
+/// How many of `todo` tiles run at once: as many of the largest as fit in the budget, at most
+/// one per thread (the matchers that use every core run alone).
+fn tiles_at_once(matcher: &Matcher, max_memory: u64, largest: u64, todo: usize) -> usize {
+    let threads = rayon::current_num_threads().max(1);
+    if matcher.one_at_a_time() {
+        1
+    } else {
+        (((max_memory - PROCESS_BYTES) / largest.max(1)) as usize)
+            .clamp(1, threads.min(todo.max(1)))
+    }
+}
+
+/// Merges the finished tiles' cells into the DSM, finishes it (holes, median filter) and writes
+/// it.
+fn merge_tiles(
+    opts: &ReconstructOptions,
+    grid: &DsmGrid,
+    folder: &TileFolder,
+    records: &[TileRecord],
+) -> Result<DsmSummary> {
+    let mut mosaic = Mosaic::new(grid, opts.gridding);
     let mut points = 0;
-    for r in &summary.records {
+    for r in records {
         if let (TileStatus::Done, Some(cells)) = (r.status, r.cells) {
-            mosaic.add(&read_part(&part_path(&r.tile), cells)?);
+            mosaic.add(&folder.cells(r, cells)?);
             points += r.points;
         }
     }
-    let dsm = mosaic.into_image(&grid);
+    let dsm = mosaic.into_image(grid);
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
     let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
-    write_dsm(&opts.output, &dsm, &grid)
+    write_dsm(&opts.output, &dsm, grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
-    summary.seconds.push(("merge", t.elapsed().as_secs_f64()));
-    summary.dsm = Some(DsmSummary {
+    Ok(DsmSummary {
         points,
         measured_cells,
         filled_cells: dsm.data().iter().filter(|v| v.is_finite()).count(),
         grid: grid.clone(),
         comparison: None,
-    });
-    if let Some(truth) = &opts.truth {
-        let zone = UtmZone::from_epsg(grid.epsg)?;
-        let truth = crate::score::read_truth(truth, zone)?;
-        summary.scores = Some(crate::score::score_dsm_file(&opts.output, &truth)?);
-    }
-    Ok(summary)
+    })
+}
+
+/// The benchmark's scores of the written DSM against a ground-truth DSM on its grid.
+fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmScores> {
+    let zone = UtmZone::from_epsg(grid.epsg)?;
+    let truth = crate::score::read_truth(truth, zone)?;
+    crate::score::score_dsm_file(dsm, &truth)
 }
 
 /// Peak bytes per DSM cell while assembling: the mosaic (height + count), the filled and the

@@ -1,5 +1,5 @@
 //! File formats: exact round trips, files written by other tools, corrupt inputs and the real
-//! s2p test data (read in place from /work/shared when it exists).
+//! s2p test data (read in place where it is present, see `testdata`).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -924,13 +924,9 @@ fn sum(img: &Image) -> f64 {
         .sum()
 }
 
+/// `<s2p's test data>/tests/data/<rel>`, or None (the test skips) where the set is absent.
 fn anchor(rel: &str) -> Option<PathBuf> {
-    let shared = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared"));
-    if !shared.is_dir() {
-        eprintln!("skipping: {} is absent", shared.display());
-        return None;
-    }
-    Some(shared.join("anchors/data/s2p/tests/data").join(rel))
+    testdata::dataset("anchors/data/s2p").map(|dir| dir.join("tests/data").join(rel))
 }
 
 #[test]

@@ -1,22 +1,17 @@
-//! The resizers against the upstream reference tensors (`../shared/fixtures`): Pillow's 8-bit
+//! The resizers against the upstream reference tensors (the parity fixtures): Pillow's 8-bit
 //! bilinear resize (SegFormer fixture) must match bit for bit, torch's antialiased bilinear
 //! resize (DINOv3 fixture) too (the fixture's own tolerance is 2e-7; this port is bit-exact).
-
-use std::path::PathBuf;
 
 use raster::resize::{resize_antialias_bilinear, resize_pil_bilinear_u8};
 use raster::Image;
 use safetensors::{Dtype, SafeTensors};
 
-/// Tensor `name` of `<fixture>/tensors.safetensors` (F32) as (shape, values). A missing fixture
-/// folder fails the test: a skipped parity test would prove nothing.
+const SEGFORMER: &str = "fixtures/segformer-tiny";
+const DINOV3: &str = "fixtures/dinov3-tiny";
+
+/// Tensor `name` of `<fixture>/tensors.safetensors` (F32) as (shape, values).
 fn tensor(fixture: &str, name: &str) -> (Vec<usize>, Vec<f32>) {
-    let path = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/fixtures"
-    ))
-    .join(fixture)
-    .join("tensors.safetensors");
+    let path = testdata::checked(fixture).join("tensors.safetensors");
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let st = SafeTensors::deserialize(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let view = st
@@ -75,27 +70,30 @@ fn max_abs_diff(got: &Image, want: &Image) -> f32 {
 
 #[test]
 fn pil_bilinear_matches_pillow_at_the_real_1024_to_1000_ratio() {
-    let input = hwc("segformer-tiny", "pre.pil_test.in_u8");
-    let want = hwc("segformer-tiny", "pre.pil_test.out_u8");
+    testdata::require!(SEGFORMER);
+    let input = hwc(SEGFORMER, "pre.pil_test.in_u8");
+    let want = hwc(SEGFORMER, "pre.pil_test.out_u8");
     let got = resize_pil_bilinear_u8(&input, want.width(), want.height()).unwrap();
     assert_eq!(count_differences(&got, &want), 0);
 }
 
 #[test]
 fn pil_bilinear_matches_pillow_when_up_and_down_scaling() {
+    testdata::require!(SEGFORMER);
     // 96 -> 92 columns (down), 64 -> 76 rows (up): both branches of the filter scale.
-    let input = hwc("segformer-tiny", "input.image_u8");
-    let want = hwc("segformer-tiny", "pre.resized_u8");
+    let input = hwc(SEGFORMER, "input.image_u8");
+    let want = hwc(SEGFORMER, "pre.resized_u8");
     let got = resize_pil_bilinear_u8(&input, want.width(), want.height()).unwrap();
     assert_eq!(count_differences(&got, &want), 0);
 }
 
 #[test]
 fn antialias_bilinear_matches_torch() {
+    testdata::require!(DINOV3);
     // The processor multiplies the truncated uint8 images by float32(1/255), then resizes.
     let inv255 = (1.0f64 / 255.0) as f32;
     for (b, name) in [(0, "pre.left_u8"), (1, "pre.left_hat_u8")] {
-        let u8_image = hwc("dinov3-tiny", name);
+        let u8_image = hwc(DINOV3, name);
         let rescaled = Image::new(
             u8_image.width(),
             u8_image.height(),
@@ -103,7 +101,7 @@ fn antialias_bilinear_matches_torch() {
             u8_image.data().iter().map(|&v| v * inv255).collect(),
         )
         .unwrap();
-        let want = nchw("dinov3-tiny", "pre.resized", b);
+        let want = nchw(DINOV3, "pre.resized", b);
         let got = resize_antialias_bilinear(&rescaled, want.width(), want.height()).unwrap();
         let diff = max_abs_diff(&got, &want);
         eprintln!("pre.resized[{b}] max abs diff {diff:e}");
