@@ -421,54 +421,127 @@ fn evaluate_pair(
         &opts.method_name,
         records::STATUS_SCORED,
     );
-
-    // The ground-truth disparity: needed by the Omaha rule and by Method::GroundTruth.
-    let omaha = layout::is_omaha_split(&split.name);
-    let needs_gt = omaha || matches!(opts.method, Method::GroundTruth);
-    let gt_disparity = if needs_gt && files.gt_disparity.is_file() {
-        Some(read_disparity(
-            &files.gt_disparity,
-            "ground-truth disparity",
-        )?)
-    } else {
-        None
-    };
+    let gt_disparity = ground_truth_disparity(opts, split, &files)?;
     if let Some(d) = &gt_disparity {
-        let (exceeds, max) = aggregate::exceeds_disparity_limit(d, opts.omaha_max_disparity);
-        record.max_gt_disparity = max;
-        if omaha && exceeds {
-            record.status = records::STATUS_DROPPED.to_string();
+        if dropped_by_omaha_rule(opts, split, d, &mut record) {
             return Ok(record);
         }
     }
-
-    // Ground truth of the AOI (cached across its pairs).
     let rpc_left = read_rpc(&files.rpc_left, "left")?;
     let rpc_right = read_rpc(&files.rpc_right, "right")?;
-    if truth.as_ref().is_none_or(|t| t.aoi != files.aoi) {
-        let zone = UtmZone::from_lonlat(rpc_left.lon_offset, rpc_left.lat_offset);
-        *truth = Some(Truth::read_with(
-            &files.truth,
-            &files.aoi,
-            zone,
-            opts.protocol,
-        )?);
-    }
-    let truth = truth.as_ref().expect("just read");
-
+    let truth = aoi_truth(opts, &files, &rpc_left, truth)?;
     let (hl, hr) = read_homographies(&files.homography)
         .with_context(|| format!("reading the homographies {}", files.homography.display()))?;
     let left_img = raster::read_image(&files.left)
         .with_context(|| format!("reading the left image {}", files.left.display()))?;
     let full = left_img.size();
     let win = raster::geometry::centre_window(full.0, full.1, opts.crop, opts.crop);
-    let (x0, y0, cw, ch) = win;
     let (hl, hr) = (
-        crop_homography(&hl, x0 as f64, y0 as f64),
-        crop_homography(&hr, x0 as f64, y0 as f64),
+        crop_homography(&hl, win.0 as f64, win.1 as f64),
+        crop_homography(&hr, win.0 as f64, win.1 as f64),
     );
+    let cameras = CroppedCameras {
+        rpc_left: &rpc_left,
+        rpc_right: &rpc_right,
+        hl: &hl,
+        hr: &hr,
+    };
+    let disparity = method_disparity(opts, split, &files, left_img, win, &cameras, gt_disparity)?;
+    let (dsm, pixels) = predicted_dsm(&disparity, &hl, &hr, &rpc_left, &rpc_right, &truth.grid)?;
+    record.pixels = pixels;
+    if opts.save_dsm {
+        let path = saved_dsm_path(&opts.out_dir, &opts.method_name, &split.name, stem);
+        camera::write_dsm(&path, &dsm, &truth.grid)
+            .with_context(|| format!("writing the predicted DSM {}", path.display()))?;
+    }
+    let s = score_dsm(
+        &dsm,
+        &truth.dsm,
+        &truth.exclusions,
+        &opts.protocol.score_params(),
+    )?;
+    record_scores(&mut record, &s);
+    Ok(record)
+}
 
-    let disparity = match &opts.method {
+/// The pair's ground-truth disparity when something needs it (the Omaha rule,
+/// `Method::GroundTruth`) and it exists.
+fn ground_truth_disparity(
+    opts: &EvalOptions,
+    split: &Split,
+    files: &PairFiles,
+) -> Result<Option<Image>> {
+    let needs_gt =
+        layout::is_omaha_split(&split.name) || matches!(opts.method, Method::GroundTruth);
+    if needs_gt && files.gt_disparity.is_file() {
+        Ok(Some(read_disparity(
+            &files.gt_disparity,
+            "ground-truth disparity",
+        )?))
+    } else {
+        Ok(None)
+    }
+}
+
+/// Records the pair's largest true disparity, and marks the pair dropped when it is an Omaha
+/// pair beyond the limit (the release never scores those).
+fn dropped_by_omaha_rule(
+    opts: &EvalOptions,
+    split: &Split,
+    gt_disparity: &Image,
+    record: &mut PairRecord,
+) -> bool {
+    let (exceeds, max) = aggregate::exceeds_disparity_limit(gt_disparity, opts.omaha_max_disparity);
+    record.max_gt_disparity = max;
+    let dropped = layout::is_omaha_split(&split.name) && exceeds;
+    if dropped {
+        record.status = records::STATUS_DROPPED.to_string();
+    }
+    dropped
+}
+
+/// The ground truth of the pair's AOI, read once for all the AOI's pairs (`cached` holds the
+/// last AOI's).
+fn aoi_truth<'a>(
+    opts: &EvalOptions,
+    files: &PairFiles,
+    rpc_left: &RpcModel,
+    cached: &'a mut Option<Truth>,
+) -> Result<&'a Truth> {
+    if cached.as_ref().is_none_or(|t| t.aoi != files.aoi) {
+        let zone = UtmZone::from_lonlat(rpc_left.lon_offset, rpc_left.lat_offset);
+        *cached = Some(Truth::read_with(
+            &files.truth,
+            &files.aoi,
+            zone,
+            opts.protocol,
+        )?);
+    }
+    Ok(cached.as_ref().expect("just read"))
+}
+
+/// The cameras of a pair, the homographies shifted to the crop.
+struct CroppedCameras<'a> {
+    rpc_left: &'a RpcModel,
+    rpc_right: &'a RpcModel,
+    hl: &'a Homography,
+    hr: &'a Homography,
+}
+
+/// The disparity of the cropped pair by the evaluated method: matched here, read from the
+/// predictions, or the ground truth's.
+fn method_disparity(
+    opts: &EvalOptions,
+    split: &Split,
+    files: &PairFiles,
+    left_img: Image,
+    win: (usize, usize, usize, usize),
+    cameras: &CroppedCameras,
+    gt_disparity: Option<Image>,
+) -> Result<Image> {
+    let full = left_img.size();
+    let (x0, y0, cw, ch) = win;
+    match &opts.method {
         Method::Matcher(matcher) => {
             let right_img = raster::read_image(&files.right)
                 .with_context(|| format!("reading the right image {}", files.right.display()))?;
@@ -485,15 +558,21 @@ fn evaluate_pair(
             }
             let l = crop(&left_img, x0, y0, cw, ch)?;
             let r = crop(&right_img, x0, y0, cw, ch)?;
-            let range = camera_disparity_range(&rpc_left, &rpc_right, &hl, &hr, (cw, ch))?;
-            matcher
+            let range = camera_disparity_range(
+                cameras.rpc_left,
+                cameras.rpc_right,
+                cameras.hl,
+                cameras.hr,
+                (cw, ch),
+            )?;
+            Ok(matcher
                 .disparity(&l, &r, RangeSource::Given(range), &Silent)?
-                .disparity
+                .disparity)
         }
         Method::Predictions(dir) => {
-            let path = layout::prediction_path(dir, &split.name, stem)?;
+            let path = layout::prediction_path(dir, &split.name, &files.stem)?;
             let d = read_disparity(&path, "predicted disparity")?;
-            fit_disparity(d, &path, full, win)?
+            fit_disparity(d, &path, full, win)
         }
         Method::GroundTruth => {
             let Some(d) = gt_disparity else {
@@ -502,25 +581,13 @@ fn evaluate_pair(
                     files.gt_disparity.display()
                 );
             };
-            fit_disparity(d, &files.gt_disparity, full, win)?
+            fit_disparity(d, &files.gt_disparity, full, win)
         }
-    };
-    drop(left_img);
-
-    let dsm = predicted_dsm(&disparity, &hl, &hr, &rpc_left, &rpc_right, &truth.grid)?;
-    record.pixels = dsm.1;
-    let dsm = dsm.0;
-    if opts.save_dsm {
-        let path = saved_dsm_path(&opts.out_dir, &opts.method_name, &split.name, stem);
-        camera::write_dsm(&path, &dsm, &truth.grid)
-            .with_context(|| format!("writing the predicted DSM {}", path.display()))?;
     }
-    let s = score_dsm(
-        &dsm,
-        &truth.dsm,
-        &truth.exclusions,
-        &opts.protocol.score_params(),
-    )?;
+}
+
+/// Copies the benchmark's scores into the pair's record.
+fn record_scores(record: &mut PairRecord, s: &DsmScores) {
     if s.no_overlap() {
         record.status = records::STATUS_NO_OVERLAP.to_string();
     }
@@ -536,7 +603,6 @@ fn evaluate_pair(
         record.offset_no_water,
     ) = (s.no_water.dx, s.no_water.dy, s.no_water.offset);
     record.cells = s.filtered.cells;
-    Ok(record)
 }
 
 /// The DSM of a (cropped) rectified disparity on `grid`: the release's evaluation mask
