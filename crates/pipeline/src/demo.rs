@@ -10,11 +10,11 @@ mod disparities;
 mod dsms;
 mod figures;
 mod format;
+mod laps;
 mod report;
 mod summary;
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, Result};
 use raster::formats::{write_png, PngDepth};
@@ -27,6 +27,7 @@ use crate::progress::{track, Progress};
 use crate::world_io::{image_ids, mask_picture, save_world};
 use disparities::{score_disparities, DisparityResult};
 use dsms::{read_world_truth, score_dsms, triangulate_dsms};
+use laps::Laps;
 use report::{write_report, ReportContext};
 
 pub use figures::{dsm_picture, hillshade, thumbnail};
@@ -145,28 +146,6 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
         seconds: laps.seconds,
         report,
     })
-}
-
-/// The wall time of each step, for the report's timings table.
-struct Laps {
-    clock: Instant,
-    seconds: Vec<(String, f64)>,
-}
-
-impl Laps {
-    fn start() -> Self {
-        Laps {
-            clock: Instant::now(),
-            seconds: Vec::new(),
-        }
-    }
-
-    /// Ends the step `name` and starts the next one.
-    fn lap(&mut self, name: &str) {
-        self.seconds
-            .push((name.to_string(), self.clock.elapsed().as_secs_f64()));
-        self.clock = Instant::now();
-    }
 }
 
 /// Renders the procedural world of the options' size and seed.

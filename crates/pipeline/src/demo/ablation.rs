@@ -17,120 +17,80 @@
 mod heldout;
 mod report;
 mod runs;
+mod summary;
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use dataset::subset::Subset;
-use matching::SgmParams;
 
-use crate::eval::{evaluate, EvalOptions, Method, PairRecord, Table};
+use super::laps::Laps;
+use crate::eval::{evaluate, EvalOptions, EvalReport, Method, Table};
 use crate::matcher::{Matcher, MonsterOptions, Network};
 use crate::progress::Progress;
-use crate::world_training::{
+use crate::stages::world_training::{
     build_world_training, WorldMasks, WorldTrainingOptions, WorldTrainingSummary,
 };
 use nn::device::DeviceChoice;
 
 pub use heldout::{HeldOut, CROSS_SEASON, HELDOUT_SEED_OFFSET, SYNCHRONIC};
 pub use runs::{subset_name, RunPlan, RunResult};
+pub use summary::{AblationOptions, AblationSummary};
 
 /// The subsets the ablation compares, in the table's order.
 pub const SUBSETS: [Subset; 2] = [Subset::S1, Subset::S3];
-
-/// What the ablation runs on.
-#[derive(Clone, Debug)]
-pub struct AblationOptions {
-    /// Folder of the report and everything it is made from.
-    pub out_dir: PathBuf,
-    /// World size, pixels (training, validation and held-out worlds).
-    pub size: usize,
-    /// Training worlds (real pairs of S1).
-    pub train_worlds: usize,
-    /// Validation worlds (the training curves' validation EPE).
-    pub val_worlds: usize,
-    /// Held-out test worlds.
-    pub heldout_worlds: usize,
-    /// Seed of the worlds, the initial weights and the data order.
-    pub seed: u64,
-    /// Optimiser steps of each run: the training budget, the same for S1 and S3.
-    pub steps: usize,
-    /// Validate every this many steps (and before the first).
-    pub validate_every: usize,
-    /// Validation pairs scored at each validation.
-    pub valid_pairs: usize,
-    /// The classical matcher: the training set's teacher and the table's baseline.
-    pub sgm: SgmParams,
-}
-
-impl AblationOptions {
-    /// The defaults `seasonstereo demo --ablation` uses: about 10 minutes on 2 cores.
-    pub fn new(out_dir: impl Into<PathBuf>) -> Self {
-        AblationOptions {
-            out_dir: out_dir.into(),
-            size: 256,
-            train_worlds: 4,
-            val_worlds: 1,
-            heldout_worlds: 3,
-            seed: 1,
-            steps: 60,
-            validate_every: 10,
-            valid_pairs: 4,
-            sgm: SgmParams::default(),
-        }
-    }
-
-    fn check(&self) -> Result<()> {
-        if self.steps == 0 || self.heldout_worlds == 0 || self.val_worlds == 0 {
-            bail!(
-                "the ablation needs at least one step, one validation world and one held-out world"
-            );
-        }
-        if self.validate_every == 0 || self.valid_pairs == 0 {
-            bail!("the training curves need validation: every N ≥ 1 steps, on ≥ 1 pairs");
-        }
-        Ok(())
-    }
-}
-
-/// What the ablation measured.
-#[derive(Clone, Debug)]
-pub struct AblationSummary {
-    pub dataset: WorldTrainingSummary,
-    pub heldout: HeldOut,
-    /// S1, then S3.
-    pub runs: Vec<RunResult>,
-    /// Rows: the classical matcher, S1, S3; columns: the held-out splits.
-    pub table: Table,
-    /// Every scored pair (all methods).
-    pub records: Vec<PairRecord>,
-    /// Row name of the classical matcher.
-    pub classical: String,
-    /// Wall-clock seconds per step.
-    pub seconds: Vec<(String, f64)>,
-    pub report: PathBuf,
-}
 
 /// Runs the ablation and writes `out_dir/report.html`.
 pub fn run_ablation(opts: &AblationOptions, progress: &dyn Progress) -> Result<AblationSummary> {
     opts.check()?;
     let out = &opts.out_dir;
+    clear_previous_run(out)?;
+    let mut laps = Laps::start();
+    let dataset = build_training_set(opts, progress)?;
+    laps.lap("training set (teacher, seasons, segmentation, dataset build)");
+    let seeds: Vec<u64> = (0..opts.heldout_worlds as u64)
+        .map(|k| opts.seed + HELDOUT_SEED_OFFSET + k)
+        .collect();
+    let heldout = heldout::write_heldout(&out.join("heldout"), opts.size, &seeds, progress)?;
+    laps.lap("held-out worlds (synchronic, winter ↔ summer)");
+    let runs = train_subsets(opts, &dataset, &mut laps, progress)?;
+    let (classical, methods) = methods_compared(opts, &runs)?;
+    let evaluated = evaluate_methods(out, &heldout, methods, progress)?;
+    let table = columns_with_data(evaluated.table);
+    laps.lap("evaluate on the held-out worlds (benchmark protocol)");
+    let summary = AblationSummary {
+        dataset,
+        heldout,
+        runs,
+        table,
+        records: evaluated.records,
+        classical,
+        seconds: laps.seconds,
+        report: out.join("report.html"),
+    };
+    report::write_report(opts, &summary)?;
+    Ok(summary)
+}
+
+/// Removes the subfolders of an earlier run, so that a table never mixes runs.
+fn clear_previous_run(out: &Path) -> Result<()> {
     for sub in ["dataset", "heldout", "runs", "eval"] {
         let dir = out.join(sub);
         if dir.exists() {
             std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
         }
     }
-    let mut seconds = Vec::new();
-    let mut clock = Instant::now();
-    let mut lap = |name: &str, seconds: &mut Vec<(String, f64)>| {
-        seconds.push((name.to_string(), clock.elapsed().as_secs_f64()));
-        clock = Instant::now();
-    };
+    Ok(())
+}
 
+/// The training set from world pairs, through the real stages with the offline segmenter's
+/// masks.
+fn build_training_set(
+    opts: &AblationOptions,
+    progress: &dyn Progress,
+) -> Result<WorldTrainingSummary> {
     let mut w = WorldTrainingOptions::new(
-        &out.join("dataset"),
+        &opts.out_dir.join("dataset"),
         opts.size,
         opts.train_worlds,
         opts.val_worlds,
@@ -138,21 +98,18 @@ pub fn run_ablation(opts: &AblationOptions, progress: &dyn Progress) -> Result<A
     w.seed = opts.seed;
     w.sgm = opts.sgm.clone();
     w.masks = WorldMasks::Segmenter;
-    let dataset = build_world_training(&w, progress).context("building the training set")?;
-    lap(
-        "training set (teacher, seasons, segmentation, dataset build)",
-        &mut seconds,
-    );
+    build_world_training(&w, progress).context("building the training set")
+}
 
-    let seeds: Vec<u64> = (0..opts.heldout_worlds as u64)
-        .map(|k| opts.seed + HELDOUT_SEED_OFFSET + k)
-        .collect();
-    let heldout = heldout::write_heldout(&out.join("heldout"), opts.size, &seeds, progress)?;
-    lap(
-        "held-out worlds (synchronic, winter ↔ summer)",
-        &mut seconds,
-    );
-
+/// Fine-tunes the tiny MonSter++ on each of [`SUBSETS`] from the same initial weights, with the
+/// same budget and seed.
+fn train_subsets(
+    opts: &AblationOptions,
+    dataset: &WorldTrainingSummary,
+    laps: &mut Laps,
+    progress: &dyn Progress,
+) -> Result<Vec<RunResult>> {
+    let out = &opts.out_dir;
     let plan = RunPlan {
         data_root: out.join("dataset"),
         dir: out.join("runs"),
@@ -173,27 +130,50 @@ pub fn run_ablation(opts: &AblationOptions, progress: &dyn Progress) -> Result<A
             .map(|(_, c)| c.clone())
             .with_context(|| format!("dataset build wrote no {} list", subset.label()))?;
         runs.push(plan.run(subset, samples, progress)?);
-        lap(&format!("train {}", subset_name(subset)), &mut seconds);
+        laps.lap(&format!("train {}", subset_name(subset)));
     }
+    Ok(runs)
+}
 
+/// The table's rows: the classical teacher (its row name is returned too), then each trained
+/// network.
+fn methods_compared(
+    opts: &AblationOptions,
+    runs: &[RunResult],
+) -> Result<(String, Vec<(String, Method)>)> {
     let teacher = Matcher::Classical(opts.sgm.clone());
     let classical = format!("{} teacher", teacher.name());
     let mut methods = vec![(classical.clone(), Method::Matcher(teacher))];
-    for run in &runs {
-        let mut config = run.config.monster_config()?;
-        config.iters = run.config.run.valid_iters;
-        let predictor = nn::infer::MonsterPredictor::load(
-            config,
-            &run.weights,
-            DeviceChoice::Cpu.device().map_err(anyhow::Error::msg)?,
-        )
-        .with_context(|| format!("loading {}", run.weights.display()))?;
-        let mut options = MonsterOptions::new(&run.weights, "tiny");
-        options.iters = Some(run.config.run.valid_iters);
-        options.device = DeviceChoice::Cpu;
-        let network = Network::new(options, predictor);
-        methods.push((run.name.clone(), Method::Matcher(Matcher::Network(network))));
+    for run in runs {
+        methods.push((run.name.clone(), Method::Matcher(trained_network(run)?)));
     }
+    Ok((classical, methods))
+}
+
+/// The network a run trained, on the CPU with the run's validation iterations.
+fn trained_network(run: &RunResult) -> Result<Matcher> {
+    let mut config = run.config.monster_config()?;
+    config.iters = run.config.run.valid_iters;
+    let predictor = nn::infer::MonsterPredictor::load(
+        config,
+        &run.weights,
+        DeviceChoice::Cpu.device().map_err(anyhow::Error::msg)?,
+    )
+    .with_context(|| format!("loading {}", run.weights.display()))?;
+    let mut options = MonsterOptions::new(&run.weights, "tiny");
+    options.iters = Some(run.config.run.valid_iters);
+    options.device = DeviceChoice::Cpu;
+    Ok(Matcher::Network(Network::new(options, predictor)))
+}
+
+/// Scores every method on the held-out splits with `eval`, into one folder: the last report
+/// holds every method's rows.
+fn evaluate_methods(
+    out: &Path,
+    heldout: &HeldOut,
+    methods: Vec<(String, Method)>,
+    progress: &dyn Progress,
+) -> Result<EvalReport> {
     let mut report = None;
     for (name, method) in methods {
         let mut e = EvalOptions::new(
@@ -207,25 +187,7 @@ pub fn run_ablation(opts: &AblationOptions, progress: &dyn Progress) -> Result<A
         e.save_dsm = true;
         report = Some(evaluate(&e, progress)?);
     }
-    let report_eval = report.expect("three methods were evaluated");
-    let table = columns_with_data(report_eval.table);
-    lap(
-        "evaluate on the held-out worlds (benchmark protocol)",
-        &mut seconds,
-    );
-
-    let summary = AblationSummary {
-        dataset,
-        heldout,
-        runs,
-        table,
-        records: report_eval.records,
-        classical,
-        seconds,
-        report: out.join("report.html"),
-    };
-    report::write_report(opts, &summary)?;
-    Ok(summary)
+    Ok(report.expect("three methods were evaluated"))
 }
 
 /// The table without the benchmark's empty columns (its four test splits, always present).

@@ -6,7 +6,8 @@ use raster::formats::{write_png, PngDepth};
 use raster::{colormap, Image};
 
 use super::heldout::CROSS_SEASON;
-use super::{AblationOptions, AblationSummary, RunResult};
+use super::runs::RunResult;
+use super::summary::{AblationOptions, AblationSummary};
 use crate::demo::{dsm_picture, metres, percent, thumbnail};
 use crate::eval::layout::{AoiRule, TruthFiles};
 use crate::eval::table::format_stat;
