@@ -328,11 +328,11 @@ fn dsm_errors_name_the_file() {
     );
 }
 
-/// `../shared/fixtures/monsterpp-tiny` beside the repository (part of the test environment).
+/// The MonSter++ parity fixture: a test reading it starts with `testdata::require!(MONSTER)`.
+const MONSTER: &str = "fixtures/monsterpp-tiny";
+
 fn monster_fixture() -> std::path::PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/fixtures/monsterpp-tiny");
-    assert!(dir.is_dir(), "fixture folder {} is missing", dir.display());
-    dir
+    testdata::checked(MONSTER)
 }
 
 /// An f32 tensor of the fixture's tensors.safetensors: (shape, values).
@@ -364,6 +364,7 @@ fn write_fixture_image(name: &str, path: &Path) {
 
 #[test]
 fn predict_monsterpp_reproduces_the_upstream_fixture() {
+    testdata::require!(MONSTER);
     let dir = tempfile::tempdir().unwrap();
     let (l, r, out) = (
         dir.path().join("L.iio"),
@@ -405,6 +406,7 @@ fn predict_monsterpp_reproduces_the_upstream_fixture() {
 
 #[test]
 fn predict_monsterpp_errors_name_the_file_and_the_keys() {
+    testdata::require!(MONSTER);
     let dir = tempfile::tempdir().unwrap();
     let (l, r, out) = (
         dir.path().join("L.iio"),
@@ -902,8 +904,7 @@ fn data_stages_teacher_curate_masks() {
 
 #[test]
 fn reconstruct_a_real_pair_then_score_it_on_the_dfc2019_truth() {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/dfc2019-jax068-dev");
-    assert!(d.is_dir(), "needs {}", d.display());
+    let d = testdata::require!("data/dfc2019-jax068-dev");
     let p = |rel: &str| d.join(rel).to_str().unwrap().to_string();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("003-004.tif");

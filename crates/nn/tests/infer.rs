@@ -1,4 +1,4 @@
-//! `nn::infer::MonsterPredictor` on the upstream fixture (`../shared/fixtures/monsterpp-tiny`):
+//! `nn::infer::MonsterPredictor` on the upstream fixture (`fixtures/monsterpp-tiny`):
 //! the whole pipeline (image → padding → network → unpadding) reproduces `output.disp`; tiling,
 //! NaN handling and the error messages.
 
@@ -9,7 +9,7 @@ use nn::config::MonsterConfig;
 use nn::infer::{InferError, MonsterPredictor};
 use raster::Image;
 
-const FIXTURE: &str = "monsterpp-tiny";
+const FIXTURE: &str = "fixtures/monsterpp-tiny";
 
 /// NCHW (1×3×H×W) → (H, W, 3) image.
 fn image(name: &str) -> Image {
@@ -31,6 +31,7 @@ fn predictor() -> MonsterPredictor {
 
 #[test]
 fn predictor_reproduces_fixture() {
+    testdata::require!(FIXTURE);
     let p = predictor();
     assert_eq!(p.iters, 8);
     let (l, r) = (image("input.left"), image("input.right"));
@@ -51,6 +52,7 @@ fn predictor_reproduces_fixture() {
 
 #[test]
 fn strips_blend_and_odd_sizes() {
+    testdata::require!(FIXTURE);
     let mut p = predictor();
     let (l, r) = (image("input.left"), image("input.right"));
     // Odd size: padding on every side.
@@ -86,6 +88,7 @@ fn strips_blend_and_odd_sizes() {
 
 #[test]
 fn errors_name_the_problem() {
+    testdata::require!(FIXTURE);
     let dir = support::fixture_dir(FIXTURE);
     let missing = MonsterPredictor::load(
         MonsterConfig::tiny(),

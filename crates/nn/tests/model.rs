@@ -1,5 +1,5 @@
 //! The assembled MonSter++ model: end-to-end parity against the upstream tiny fixture
-//! (`../shared/fixtures/monsterpp-tiny`), key sets and parameter counts at the real configs,
+//! (`fixtures/monsterpp-tiny`), key sets and parameter counts at the real configs,
 //! load errors on a whole checkpoint, and the save/reload round trip.
 
 mod support;
@@ -15,7 +15,7 @@ use nn::weights::{load_weights, module_keys, save_checkpoint, WeightsError};
 use safetensors::tensor::TensorView;
 use safetensors::{Dtype, SafeTensors};
 
-const FIX: &str = "monsterpp-tiny";
+const FIX: &str = "fixtures/monsterpp-tiny";
 const ITERS: usize = 8;
 
 fn weights() -> PathBuf {
@@ -122,6 +122,7 @@ fn mono_max(fx: &Fixture) -> f32 {
 
 #[test]
 fn end_to_end_parity_test_mode() {
+    testdata::require!(FIX);
     let fx = Fixture::load();
     let model = tiny_loaded(&Device::flex());
     assert_eq!(model.config(), &MonsterConfig::tiny());
@@ -136,6 +137,7 @@ fn end_to_end_parity_test_mode() {
 
 #[test]
 fn end_to_end_parity_train_mode() {
+    testdata::require!(FIX);
     let fx = Fixture::load();
     let model = tiny_loaded(&Device::flex());
     let out = run(&model, &fx, false);
@@ -214,6 +216,7 @@ fn assert_millions(got: usize, want_m: f64, what: &str) {
 
 #[test]
 fn key_sets_and_param_counts_vits() {
+    testdata::require!(FIX);
     let (t, tr) = check_keys("vits");
     assert_millions(t, 47.79, "vits total");
     assert_millions(tr, 23.00, "vits trainable");
@@ -221,6 +224,7 @@ fn key_sets_and_param_counts_vits() {
 
 #[test]
 fn key_sets_and_param_counts_vitb() {
+    testdata::require!(FIX);
     let (t, tr) = check_keys("vitb");
     assert_millions(t, 129.39, "vitb total");
     assert_millions(tr, 31.92, "vitb trainable");
@@ -228,6 +232,7 @@ fn key_sets_and_param_counts_vitb() {
 
 #[test]
 fn key_sets_and_param_counts_vitl() {
+    testdata::require!(FIX);
     let (t, tr) = check_keys("vitl");
     // Exact values from the upstream listing (PyTorch `parameters()`, buffers excluded).
     assert_eq!(t, 388_690_818);
@@ -264,6 +269,7 @@ fn load_err(path: &PathBuf) -> (WeightsError, String) {
 
 #[test]
 fn missing_keys_are_an_error_naming_them() {
+    testdata::require!(FIX);
     let path = tmp("missing.safetensors");
     let gone = [
         "update_block_mix_mono.gru08.convq.weight",
@@ -287,6 +293,7 @@ fn missing_keys_are_an_error_naming_them() {
 
 #[test]
 fn wrong_shapes_are_an_error_naming_them() {
+    testdata::require!(FIX);
     let path = tmp("shape.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| match n {
         // Halved output channels.
@@ -320,6 +327,7 @@ fn wrong_shapes_are_an_error_naming_them() {
 
 #[test]
 fn truncated_or_foreign_file_is_an_error_naming_it() {
+    testdata::require!(FIX);
     let bytes = std::fs::read(weights()).unwrap();
     let path = tmp("truncated.safetensors");
     std::fs::write(&path, &bytes[..bytes.len() - 1000]).unwrap();
@@ -363,6 +371,7 @@ fn safetensors_header_length_0x80_is_not_pickle() {
 /// it lacks instead of failing somewhere in the forward pass.
 #[test]
 fn wrong_config_is_an_error() {
+    testdata::require!(FIX);
     let path = tmp("other-config.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         let deep = n
@@ -383,6 +392,7 @@ fn wrong_config_is_an_error() {
 
 #[test]
 fn save_and_reload_gives_identical_output() {
+    testdata::require!(FIX);
     let fx = Fixture::load();
     let device = Device::flex();
     let model = tiny_loaded(&device);
@@ -473,6 +483,7 @@ fn freeze_for_training_freezes_exactly_the_mono_branch() {
 
 #[test]
 fn depth_anything_checkpoint_loads_into_the_mono_branch_and_the_dpt_copy() {
+    testdata::require!(FIX);
     // A Depth Anything V2 checkpoint made from the fixture's mono branch: `pretrained.*` and
     // `depth_head.*` keys, nothing else.
     let path = tmp("depth_anything.safetensors");

@@ -1,5 +1,5 @@
 //! DINOv3 ViT and the similarity score against the upstream reference
-//! (`../shared/fixtures/dinov3-tiny`: HF `DINOv3ViTModel`, random F16-rounded weights, hidden 128,
+//! (`fixtures/dinov3-tiny`: HF `DINOv3ViTModel`, random F16-rounded weights, hidden 128,
 //! 4 layers, 2 heads of 64, eager attention, CPU f32; transformers 4.57.6, torch 2.4.1).
 //!
 //! Each test prints the max abs differences it measured (`--nocapture`). The tolerances asserted
@@ -20,7 +20,7 @@ use raster::geometry::{warp_by_disparity, warp_by_disparity_grid_sample};
 use raster::{Image, Mask};
 use support::{fixture_dir, max_abs_diff, Fixture};
 
-const FIX: &str = "dinov3-tiny";
+const FIX: &str = "fixtures/dinov3-tiny";
 
 fn weights_path() -> std::path::PathBuf {
     fixture_dir(FIX).join("weights.safetensors")
@@ -77,6 +77,7 @@ fn fixture_preprocess() -> Dinov3Preprocess {
 
 #[test]
 fn embeddings_rope_and_layer0_intermediates() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let model = tiny_model(&fx);
     let px = fx.t::<4>("input.pixel_values");
@@ -116,6 +117,7 @@ fn embeddings_rope_and_layer0_intermediates() {
 
 #[test]
 fn every_layer_last_hidden_state_pooler_and_similarity() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let model = tiny_model(&fx);
     let (last, layers) = model.forward_layers(fx.t::<4>("input.pixel_values"), true);
@@ -138,6 +140,7 @@ fn every_layer_last_hidden_state_pooler_and_similarity() {
 
 #[test]
 fn warp_masks_and_uint8_inputs_match_the_reference() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let left = hwc(&fx, "input.left");
     let right = hwc(&fx, "input.right");
@@ -210,6 +213,7 @@ fn warp_masks_and_uint8_inputs_match_the_reference() {
 
 #[test]
 fn similarity_from_the_images_end_to_end() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let dino = Dinov3Features::from_file(&weights_path(), Dinov3Config::tiny(), fx.device.clone())
         .unwrap()
@@ -248,6 +252,7 @@ fn similarity_from_the_images_end_to_end() {
 
 #[test]
 fn processor_and_model_at_224() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let model = tiny_model(&fx);
     let image = hwc(&fx, "pre224.image_u8");
@@ -286,6 +291,7 @@ fn listed_keys(name: &str) -> BTreeMap<String, Vec<usize>> {
 
 #[test]
 fn presets_have_the_released_key_sets_and_sizes() {
+    testdata::require!(FIX);
     let device = burn::tensor::Device::flex();
     for (name, cfg, count) in [
         ("vits16", Dinov3Config::vits16(), 21_596_544usize),
@@ -320,6 +326,7 @@ fn presets_have_the_released_key_sets_and_sizes() {
 
 #[test]
 fn wrong_or_damaged_checkpoints_are_reported_in_hf_names() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     // A size mismatch (ViT-S on the tiny weights) names HF keys.
     let err = Dinov3Features::from_file(&weights_path(), Dinov3Config::vits16(), fx.device.clone())

@@ -1,5 +1,5 @@
 //! Parity of the networks on a GPU backend (`--features wgpu` / `cuda`) against the upstream tiny
-//! fixtures (`../shared/fixtures/*-tiny`): MonSter++ stage by stage (each stage fed with the
+//! fixtures (`fixtures/*-tiny`): MonSter++ stage by stage (each stage fed with the
 //! fixture's own inputs, so errors do not accumulate) and end to end, DINOv3 and SegFormer.
 //!
 //! Compiles to nothing without a GPU feature; with one, every test returns early with a printed
@@ -383,6 +383,7 @@ impl Tol {
 
 #[test]
 fn monsterpp_tiny_stages() {
+    testdata::require!(FIXTURE);
     for (name, device) in gpu_devices() {
         println!("== {name}: mono branch");
         let fx = fixture_on(FIXTURE, &device);
@@ -396,6 +397,7 @@ fn monsterpp_tiny_stages() {
 
 #[test]
 fn monsterpp_tiny_end_to_end() {
+    testdata::require!(FIXTURE);
     for (name, device) in gpu_devices() {
         let fx = fixture_on(FIXTURE, &device);
         let mut model = Monster::new(&MonsterConfig::tiny(), &device);
@@ -487,10 +489,11 @@ fn grid_sample_grid_layout() {
 
 #[test]
 fn dinov3_tiny() {
+    testdata::require!("fixtures/dinov3-tiny");
     for (name, device) in gpu_devices() {
-        let fx = fixture_on("dinov3-tiny", &device);
+        let fx = fixture_on("fixtures/dinov3-tiny", &device);
         let mut model = Dinov3Vit::new(&Dinov3Config::tiny(), &device);
-        let path = support::fixture_dir("dinov3-tiny").join("weights.safetensors");
+        let path = support::fixture_dir("fixtures/dinov3-tiny").join("weights.safetensors");
         let report = load_dinov3(&mut model, &path).expect("fixture weights load");
         assert!(report.is_complete(), "{report}");
         let (last, layers) = model.forward_layers(fx.t::<4>("input.pixel_values"), true);
@@ -524,11 +527,12 @@ fn dinov3_tiny() {
 
 #[test]
 fn segformer_tiny() {
+    testdata::require!("fixtures/segformer-tiny");
     for (name, device) in gpu_devices() {
-        let fx = fixture_on("segformer-tiny", &device);
+        let fx = fixture_on("fixtures/segformer-tiny", &device);
         let mut model = Segformer::new(&SegformerConfig::tiny(), &device);
         let report = model
-            .load(support::fixture_dir("segformer-tiny").join("weights.safetensors"))
+            .load(support::fixture_dir("fixtures/segformer-tiny").join("weights.safetensors"))
             .unwrap();
         assert!(report.unexpected.is_empty(), "{report}");
         println!("== {name}: SegFormer tiny");

@@ -1,6 +1,6 @@
 //! Numerical parity of the refinement iterations (geo encoding lookup, disp_warp, scale/shift
 //! alignment, ConvGRU update blocks, upsample_disp, REMP and the whole loop) against the upstream
-//! fixtures (`../shared/fixtures/monsterpp-tiny`). Inputs come from the fixture intermediates
+//! fixtures (`fixtures/monsterpp-tiny`). Inputs come from the fixture intermediates
 //! (`inter.cost_agg.0`, `inter.init_disp_q.0`, `inter.cnet_*`, `inter.feat_transfer_0.*`,
 //! `inter.stem_*`, `output.depth_mono`); matching features go through the `conv`/`desc` weights.
 
@@ -47,6 +47,7 @@ fn check_scale_shift(got: (f32, f32), want: &[f32]) {
 /// Each stage fed with fixture tensors (no error accumulation).
 #[test]
 fn stages_in_isolation() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let dev = fx.device.clone();
     let parts = Parts::load(&dev);
@@ -107,6 +108,7 @@ fn stages_in_isolation() {
 /// test mode (the output disparity).
 #[test]
 fn iterations_end_to_end() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let dev = fx.device.clone();
     let parts = Parts::load(&dev);
@@ -150,6 +152,7 @@ fn iterations_end_to_end() {
 /// disparity reaches every block, with finite gradients.
 #[test]
 fn iterations_backward_smoke() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let ad = fx.device.clone().autodiff();
     // Load on the autodiff device: a module loaded on the plain device and moved with

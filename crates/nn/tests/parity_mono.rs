@@ -1,5 +1,5 @@
 //! Parity of the mono branch (DINOv2 + both DPT heads) against the upstream tiny fixture
-//! `../shared/fixtures/monsterpp-tiny` (`inter.vit_*`, `inter.depth_mono`, `inter.dpt_feat_*`).
+//! `fixtures/monsterpp-tiny` (`inter.vit_*`, `inter.depth_mono`, `inter.dpt_feat_*`).
 
 mod support;
 
@@ -9,7 +9,7 @@ use nn::monster::dpt::{infer_mono, DptHead};
 use nn::monster::vit::{mono_input, normalize_image, DinoVisionTransformer};
 use nn::weights::load_submodule;
 
-const FIX: &str = "monsterpp-tiny";
+const FIX: &str = "fixtures/monsterpp-tiny";
 
 fn input(name: &str, device: &Device) -> Tensor<4> {
     let (shape, v) = support::tensor(FIX, "tensors.safetensors", name);
@@ -50,6 +50,7 @@ fn weights() -> std::path::PathBuf {
 
 #[test]
 fn vit_matches_fixture() {
+    testdata::require!(FIX);
     let device = Device::default();
     let cfg = MonsterConfig::tiny();
     let mut vit = DinoVisionTransformer::new(&cfg.vit, &device);
@@ -75,6 +76,7 @@ fn vit_matches_fixture() {
 
 #[test]
 fn dpt_heads_match_fixture() {
+    testdata::require!(FIX);
     let device = Device::default();
     let cfg = MonsterConfig::tiny();
     let mut vit = DinoVisionTransformer::new(&cfg.vit, &device);

@@ -1,5 +1,5 @@
 //! Parity of the SegFormer port with HF transformers and the release's mask scripts, against the
-//! random-weight fixture `../shared/fixtures/segformer-tiny` (see its README): every listed
+//! random-weight fixture `fixtures/segformer-tiny` (see its README): every listed
 //! intermediate, the logits, the post-processing tensors, the masks, the PIL resize, the
 //! morphology on the synthetic mask, and the key set of the real mit-b2 checkpoint.
 
@@ -21,7 +21,7 @@ use raster::resize::resize_pil_bilinear_u8;
 use raster::{Image, Mask};
 use support::Fixture;
 
-const FIX: &str = "segformer-tiny";
+const FIX: &str = "fixtures/segformer-tiny";
 
 fn weights() -> PathBuf {
     support::fixture_dir(FIX).join("weights.safetensors")
@@ -64,6 +64,7 @@ fn floats(m: &Mask) -> Vec<f32> {
 
 #[test]
 fn network_intermediates_and_logits_match() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let model = tiny_model(&fx.device);
     let mut trace = Trace::on();
@@ -117,6 +118,7 @@ fn network_intermediates_and_logits_match() {
 
 #[test]
 fn pixel_values_from_the_resized_image_match() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let resized = hwc_image(&fx, "pre.resized_u8");
     let x = pixel_values(&resized, &fx.device).unwrap();
@@ -128,6 +130,7 @@ fn pixel_values_from_the_resized_image_match() {
 
 #[test]
 fn pil_resize_is_bit_exact() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let original = to_rgb_u8(&hwc_image(&fx, "input.image_u8")).unwrap();
     let [h, w] = [76, 92];
@@ -165,6 +168,7 @@ fn check_class(fx: &Fixture, seg: &Segmentation, kind: MaskKind, clear: &[bool])
 
 #[test]
 fn postprocessing_of_the_reference_logits_is_exact() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let (w, h) = (96, 64);
     let logits = fx.t::<4>("output.logits");
@@ -228,6 +232,7 @@ fn postprocessing_of_the_reference_logits_is_exact() {
 
 #[test]
 fn segmenter_end_to_end_matches_where_the_classes_are_clear() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let mut config = SegmenterConfig::with_model(SegformerConfig::tiny());
     config.input_size = (92, 76);
@@ -269,6 +274,7 @@ fn segmenter_end_to_end_matches_where_the_classes_are_clear() {
 
 #[test]
 fn synthetic_morphology_matches_scipy() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let mask = mask_of(&fx, "post.synth.mask");
     let comps = label_components(&mask, true);
@@ -311,6 +317,7 @@ fn listed_keys() -> BTreeMap<String, Vec<usize>> {
 
 #[test]
 fn mit_b2_key_set_shapes_and_parameter_count() {
+    testdata::require!(FIX);
     let cfg = SegformerConfig::mit_b2(9);
     let model = Segformer::new(&cfg, &Device::flex());
     let keys: BTreeMap<String, Vec<usize>> = model.torch_keys().into_iter().collect();
@@ -345,6 +352,7 @@ fn tmp(name: &str) -> PathBuf {
 
 #[test]
 fn release_checkpoint_naming_loads_and_optimizer_state_is_dropped() {
+    testdata::require!(FIX);
     // The release's `.pt` flattened: `model_state_dict.module.model.<HF key>`, plus optimizer state.
     let bytes = std::fs::read(weights()).unwrap();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
@@ -371,6 +379,7 @@ fn release_checkpoint_naming_loads_and_optimizer_state_is_dropped() {
 
 #[test]
 fn load_errors_name_the_keys() {
+    testdata::require!(FIX);
     let device = Device::flex();
     // Missing tensor.
     let path = tmp("missing.safetensors");
@@ -412,6 +421,7 @@ fn load_errors_name_the_keys() {
 
 #[test]
 fn bad_images_are_rejected() {
+    testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     let mut config = SegmenterConfig::with_model(SegformerConfig::tiny());
     config.input_size = (92, 76);
@@ -507,6 +517,7 @@ mod torch_file {
 
 #[test]
 fn release_pt_checkpoint_loads() {
+    testdata::require!(FIX);
     // The tiny weights as the release stores its checkpoint: a torch.save zip pickle with the
     // state dict under `model_state_dict`, keys carrying `module.` and `model.`.
     let tensors: Vec<(String, Vec<usize>, Vec<f32>)> = support::read_all(&weights())

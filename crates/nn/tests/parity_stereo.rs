@@ -1,6 +1,6 @@
 //! Numerical parity of the stereo features, the cost volume / 3-D aggregation / initial disparity,
 //! the superpixel head and the context network against the upstream fixtures
-//! (`../shared/fixtures/monsterpp-tiny`). Upstream parts are fed from the fixture intermediates
+//! (`fixtures/monsterpp-tiny`). Upstream parts are fed from the fixture intermediates
 //! (`inter.dpt_feat_*`), and each stage is checked both in isolation (fixture inputs) and chained.
 
 mod support;
@@ -18,7 +18,7 @@ use nn::monster::cost::{
 };
 use nn::monster::features::StereoFeatures;
 
-const FIXTURE: &str = "monsterpp-tiny";
+const FIXTURE: &str = "fixtures/monsterpp-tiny";
 /// DPT `features` of the tiny fixture (= vits).
 const DPT_F: usize = 64;
 /// Hidden dim of the tiny fixture.
@@ -62,6 +62,7 @@ fn load<M: Module>(mut m: M) -> M {
 
 #[test]
 fn stereo_features() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let feats = load(StereoFeatures::new(DPT_F, &fx.device));
 
@@ -106,6 +107,7 @@ fn stereo_features() {
 
 #[test]
 fn cost_volume_and_init_disp() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let feats = load(StereoFeatures::new(DPT_F, &fx.device));
     let cost = load(CostAggregation::new(&fx.device));
@@ -221,6 +223,7 @@ fn context_upsample_ref(disp: Tensor<4>, weights: Tensor<4>) -> Tensor<4> {
 
 #[test]
 fn spx_init_disp_up() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let spx = load(SpxHead::new(&fx.device));
     let f0 = Tensor::cat(
@@ -238,6 +241,7 @@ fn spx_init_disp_up() {
 
 #[test]
 fn context() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let ctx = load(ContextNet::new(DPT_F, HIDDEN, &fx.device));
     let stems = [
@@ -275,6 +279,7 @@ fn context() {
 /// context) on the autodiff device; BN layers run in burn's training mode there.
 #[test]
 fn gradients_flow() {
+    testdata::require!(FIXTURE);
     let fx = Fixture::load(FIXTURE);
     let dev = Device::flex().autodiff();
     let feats = load(StereoFeatures::new(DPT_F, &dev));

@@ -17,7 +17,7 @@ use nn::weights::{
 use safetensors::tensor::TensorView;
 use safetensors::SafeTensors;
 
-const FIX: &str = "monsterpp-tiny";
+const FIX: &str = "fixtures/monsterpp-tiny";
 const PARTS: [&str; 3] = ["mono_encoder.", "mono_decoder.", "feat_decoder."];
 
 /// (key → shape) of `state_dict_keys_<name>.txt` under `prefix` (without num_batches_tracked).
@@ -85,17 +85,20 @@ fn check_keys(name: &str, cfg: MonsterConfig) -> Parts {
 
 #[test]
 fn key_sets_vits() {
+    testdata::require!(FIX);
     check_keys("vits", MonsterConfig::vits());
 }
 
 #[test]
 fn key_sets_vitb() {
+    testdata::require!(FIX);
     check_keys("vitb", MonsterConfig::vitb());
 }
 
 /// Lazy parameters: building ViT-L allocates nothing, so this is cheap.
 #[test]
 fn key_sets_and_param_counts_vitl() {
+    testdata::require!(FIX);
     let parts = check_keys("vitl", MonsterConfig::vitl());
     let m = |n: usize| (n as f64 / 1e6 * 100.0).round() / 100.0;
     assert_eq!(m(parts.encoder.num_params()), 304.37);
@@ -164,6 +167,7 @@ fn tiny_encoder() -> DinoVisionTransformer {
 
 #[test]
 fn missing_key_is_an_error_naming_it() {
+    testdata::require!(FIX);
     let path = tmp("missing.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         (n != "mono_encoder.blocks.3.attn.qkv.weight" && n != "mono_encoder.norm.weight")
@@ -183,6 +187,7 @@ fn missing_key_is_an_error_naming_it() {
 
 #[test]
 fn wrong_shape_is_an_error_naming_it() {
+    testdata::require!(FIX);
     let path = tmp("shape.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         if n == "mono_encoder.blocks.0.mlp.fc1.bias" {
@@ -201,6 +206,7 @@ fn wrong_shape_is_an_error_naming_it() {
 
 #[test]
 fn unexpected_keys_are_reported_not_fatal() {
+    testdata::require!(FIX);
     let path = support::fixture_dir(FIX).join("weights.safetensors");
     // A feat_decoder-shaped head loaded from the mono_decoder keys: the output convs are extra.
     let mut dec = DptHead::new(64, &MonsterConfig::tiny().dpt, false, &Device::default());
@@ -214,6 +220,7 @@ fn unexpected_keys_are_reported_not_fatal() {
 
 #[test]
 fn truncated_file_is_an_error_naming_the_file() {
+    testdata::require!(FIX);
     let bytes = std::fs::read(support::fixture_dir(FIX).join("weights.safetensors")).unwrap();
     let path = tmp("truncated.safetensors");
     std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
@@ -238,6 +245,7 @@ fn truncated_file_is_an_error_naming_the_file() {
 
 #[test]
 fn module_prefix_and_wrapper_are_stripped() {
+    testdata::require!(FIX);
     let path = tmp("wrapped.safetensors");
     // `model.module.mono_encoder.*`, as a flattened `{'model': DataParallel state_dict}`.
     let bytes = std::fs::read(support::fixture_dir(FIX).join("weights.safetensors")).unwrap();
@@ -258,6 +266,7 @@ fn module_prefix_and_wrapper_are_stripped() {
 
 #[test]
 fn checkpoint_round_trip() {
+    testdata::require!(FIX);
     let device = Device::default();
     let mut enc = tiny_encoder();
     load_submodule(

@@ -3,10 +3,10 @@
 //! # What is compared
 //!
 //! Product disparities (seasonstereo's census + SGM, `seasonstereo predict --method sgm`) of five
-//! real WorldView-3 pairs of `shared/data/dfc2019-jax068-dev` (four of them larger than 1024 px,
+//! real WorldView-3 pairs of the `data/dfc2019-jax068-dev` set (four of them larger than 1024 px,
 //! hence centre-cropped) and of one procedural world pair are fixtures here. Both evaluators scored
 //! exactly these disparities; this test runs seasonstereo's whole `eval` chain on them (layout,
-//! crop, mask, triangulation with the bundle-adjusted RPCs read in place from `../shared`, DSM on
+//! crop, mask, triangulation with the bundle-adjusted RPCs read in place (see `testdata`), DSM on
 //! the truth's grid, registration, the three MAEs) and asserts every MAE, shift and offset equals
 //! the release's: MAE and offset to 1e-3 m, shifts exactly. Cases:
 //! - `real`: the five pairs against `JAX_068_DSM.tif` + `.txt` + `_CLS.tif` as distributed;
@@ -65,20 +65,6 @@ use pipeline::Silent;
 use raster::Image;
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/eval_parity");
-
-/// `shared/data/dfc2019-jax068-dev`, read in place.
-fn dev_data() -> PathBuf {
-    let p = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/dfc2019-jax068-dev"
-    ));
-    assert!(
-        p.join("truth/JAX_068_DSM.tif").is_file(),
-        "{} is missing: this test reads the DFC2019 JAX_068 development data in place",
-        p.display()
-    );
-    p
-}
 
 /// Full rectified size (width, height) of each pair, as `seasonstereo rectify` wrote it.
 const FULL_SIZE: [(&str, usize, usize); 6] = [
@@ -328,7 +314,7 @@ fn copy_into(dir: &Path, files: &[PathBuf]) {
 
 #[test]
 fn real_pairs_match_the_released_evaluator() {
-    let dev = dev_data();
+    let dev = testdata::require!("data/dfc2019-jax068-dev");
     let fixtures = PathBuf::from(FIXTURES);
     let tmp = tempfile::tempdir().unwrap();
     let stems: Vec<&str> = FULL_SIZE[..5].iter().map(|s| s.0).collect();

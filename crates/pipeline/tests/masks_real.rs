@@ -1,8 +1,9 @@
 //! The offline masks on real WorldView-3 imagery: DFC2019 JAX_068 development images (read in
-//! place from `../shared/data/dfc2019-jax068-dev`), heights from one near-synchronic pair
-//! reconstructed by the classical chain, masks scored against the LiDAR classes projected into
-//! the images. Bounds sit below what `scripts/jax-dev-masks.sh` measures (BENCHMARKS.md, "Masks
-//! on real imagery") and above what the procedural-world pixel classifier reaches.
+//! place from the `data/dfc2019-jax068-dev` set, see `testdata`), heights from one
+//! near-synchronic pair reconstructed by the classical chain, masks scored against the LiDAR
+//! classes projected into the images. Bounds sit below what `scripts/jax-dev-masks.sh` measures
+//! (BENCHMARKS.md, "Masks on real imagery") and above what the procedural-world pixel classifier
+//! reaches.
 
 use std::path::Path;
 
@@ -45,6 +46,7 @@ fn masks_of(images: &Path, out: &Path, segmenter: Box<dyn ImageSegmenter>) -> Ve
 
 #[test]
 fn rules_with_heights_find_the_trees_and_buildings_of_014_015() {
+    testdata::require!(common::JAX_DEV);
     let dir = tempfile::tempdir().unwrap();
     let images = dir.path().join("images");
     std::fs::create_dir_all(&images).unwrap();

@@ -1,6 +1,7 @@
 //! The classical chain on real WorldView-3 imagery: DFC2019 JAX_068 development pairs (read in
-//! place from `../shared/data/dfc2019-jax068-dev`), from the raw crops and their bundle-adjusted
-//! RPCs to a DSM scored against the LiDAR truth as distributed (plain TIFF + `_DSM.txt`).
+//! place from the `data/dfc2019-jax068-dev` set, see `testdata`), from the raw crops and their
+//! bundle-adjusted RPCs to a DSM scored against the LiDAR truth as distributed (plain TIFF +
+//! `_DSM.txt`).
 //!
 //! Bounds are set with margin above what the default matcher reaches (BENCHMARKS.md, "Real
 //! imagery"), below what the chain reached before speckle removal and MGM (4.4 / 10.1 m).
@@ -71,6 +72,7 @@ fn reconstruct_pair(l: &str, r: &str, fill: Option<usize>) -> (f64, f64, f64) {
 
 #[test]
 fn near_synchronic_pair_003_004_reaches_lidar_accuracy() {
+    testdata::require!(common::JAX_DEV);
     let (mae, coverage, measured) = reconstruct_pair("003", "004", Some(40));
     eprintln!("003-004: MAE {mae:.3} m, coverage {coverage:.3}, measured {measured:.3}");
     assert!(mae < 1.6, "MAE {mae}");
@@ -80,6 +82,7 @@ fn near_synchronic_pair_003_004_reaches_lidar_accuracy() {
 
 #[test]
 fn cross_season_pair_006_020_winter_summer_stays_close_to_synchronic() {
+    testdata::require!(common::JAX_DEV);
     let (mae, coverage, measured) = reconstruct_pair("006", "020", Some(40));
     eprintln!("006-020: MAE {mae:.3} m, coverage {coverage:.3}, measured {measured:.3}");
     assert!(mae < 2.3, "MAE {mae}");
@@ -93,6 +96,7 @@ fn cross_season_pair_006_020_winter_summer_stays_close_to_synchronic() {
 
 #[test]
 fn dfc2019_truth_as_distributed_scores_a_dsm() {
+    testdata::require!(common::JAX_DEV);
     let truth = pipeline::score::read_truth(
         &jax("truth/JAX_068_DSM.tif"),
         UtmZone::new(17, true).unwrap(),
@@ -130,6 +134,7 @@ fn dfc2019_truth_as_distributed_scores_a_dsm() {
 /// give the untiled DSM's accuracy (issue: ± 0.05 m), and a rerun resumes every tile.
 #[test]
 fn tiles_of_256_pixels_match_the_untiled_dsm_and_resume() {
+    testdata::require!(common::JAX_DEV);
     let dir = tempfile::tempdir().unwrap();
     let whole = reconstruct(&options("013", "014", &dir.path().join("whole")), &Silent).unwrap();
     let tiled_opts = ReconstructOptions {

@@ -230,15 +230,9 @@ fn a_broken_image_fails_its_tiles_only_and_a_tight_budget_names_the_fix() {
 #[cfg(feature = "network")]
 #[test]
 fn the_network_matches_every_tile_when_weights_are_given() {
+    let weights = testdata::require!("fixtures/monsterpp-tiny").join("weights.safetensors");
     let dir = tempfile::tempdir().unwrap();
     let root = raw_world(dir.path());
-    let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/fixtures/monsterpp-tiny/weights.safetensors");
-    assert!(
-        weights.is_file(),
-        "fixture {} is missing",
-        weights.display()
-    );
     let mut net = pipeline::matcher::MonsterOptions::new(weights, "tiny");
     net.device = nn::device::DeviceChoice::Cpu;
     let opts = ReconstructOptions {

@@ -21,11 +21,6 @@ fn world_set() -> &'static Path {
     })
 }
 
-fn fixture() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/fixtures/monsterpp-tiny/weights.safetensors")
-}
-
 /// The tiny preset at the smallest useful size, validation off.
 fn config(output: &Path, extra: &[&str]) -> TrainConfig {
     let mut o: Vec<String> = vec![
@@ -148,9 +143,9 @@ fn tensor_f32(file: &Path, key: &str) -> Vec<f32> {
 /// stop flag ends the run with a checkpoint.
 #[test]
 fn trains_from_fixture_weights_with_frozen_mono_branch() {
+    let init = testdata::require!("fixtures/monsterpp-tiny").join("weights.safetensors");
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
-    let init = fixture();
     let cfg = config(
         &out,
         &[

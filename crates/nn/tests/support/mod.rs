@@ -1,4 +1,4 @@
-//! Reading the upstream parity fixtures (`../shared/fixtures/*`) in place.
+//! Reading the upstream parity fixtures (the `fixtures/*` data sets, see `testdata`) in place.
 #![allow(dead_code)]
 
 pub mod tiny;
@@ -10,20 +10,10 @@ use std::collections::HashMap;
 use burn::tensor::{Device, Tensor, TensorData};
 use safetensors::{Dtype, SafeTensors};
 
-/// Folder of a fixture set, e.g. `fixture_dir("monsterpp-tiny")`. Fails loudly when absent: the
-/// fixtures are part of the test environment, a skipped parity test would prove nothing.
-pub fn fixture_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/fixtures"
-    ))
-    .join(name);
-    assert!(
-        dir.is_dir(),
-        "fixture folder {} is missing (the tests read ../shared beside the repository)",
-        dir.display()
-    );
-    dir
+/// Folder of a fixture set, e.g. `fixture_dir("fixtures/monsterpp-tiny")`, for a test that
+/// started with `testdata::require!` of that set.
+pub fn fixture_dir(set: &str) -> PathBuf {
+    testdata::checked(set)
 }
 
 /// All tensors of a safetensors file as (shape, f32 values); F16/BF16/F32 are converted, integer

@@ -21,7 +21,7 @@ use nn::weights::load_submodule;
 use super::Fixture;
 
 /// The fixture set.
-pub const FIXTURE: &str = "monsterpp-tiny";
+pub const FIXTURE: &str = "fixtures/monsterpp-tiny";
 /// Hidden width of the tiny configuration.
 pub const HIDDEN: usize = 32;
 
