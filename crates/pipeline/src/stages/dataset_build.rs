@@ -39,8 +39,10 @@ use serde::{Deserialize, Serialize};
 use crate::pairs::PairFolder;
 use crate::progress::Progress;
 use crate::stage::write_text;
-use crate::synthesize::{accepted_tags, selected_pairs, zero_invalid, CropRecord, SyntheticLayout};
-use crate::teacher::TeacherRecord;
+use crate::stages::synthesize::{
+    accepted_tags, selected_pairs, zero_invalid, CropRecord, SyntheticLayout,
+};
+use crate::stages::teacher::TeacherRecord;
 
 /// Name of the experiment list of a validation split.
 pub const VAL_LIST: &str = "sub_val";
@@ -344,71 +346,144 @@ fn build_pair(
     summary: &mut BuildSummary,
     budget: &mut Option<usize>,
 ) -> Result<bool> {
-    let name = pair.base_name();
-    // The frame every rectified file must have.
-    let pairs = PairFolder::new(&opts.pairs_dir);
-    let size = pairs.size(&name)?;
+    let inputs = PairInputs::read(opts, synthetic, pair)?;
+    let missing_masks = write_geometry(opts, layout, pair, &inputs)?;
+    copy_disparities(opts, layout, pair, &inputs)?;
+    let Some(combinations) =
+        write_combinations(opts, layout, synthetic, pair, &inputs, summary, budget)?
+    else {
+        return Ok(false);
+    };
+    let record = PairRecord {
+        pair: inputs.name,
+        left_tags: inputs.tags[0].clone(),
+        right_tags: inputs.tags[1].clone(),
+        combinations,
+        missing_masks,
+        rejected: rejected_variants(synthetic, pair)?,
+        width: inputs.size.0,
+        height: inputs.size.1,
+    };
+    crate::stage::write_json(
+        &record_path(&layout.root, pair),
+        &serde_json::to_value(&record)?,
+    )?;
+    Ok(true)
+}
 
-    let tags = match synthetic {
-        Some(s) => accepted_tags(s, pair)?,
-        None => Default::default(),
-    };
-    let side_tags = |side: Side| tags.get(side.dir()).cloned().unwrap_or_default();
-    let (left_tags, right_tags) = (side_tags(Side::Left), side_tags(Side::Right));
-    let crops = |side: Side| -> Result<Option<CropRecord>> {
-        let id = side_id(pair, side);
-        match synthetic {
-            Some(s) => s.read_crop(id),
-            None => Ok(None),
-        }
-    };
-    let crop = [crops(Side::Left)?, crops(Side::Right)?];
-    let homographies = match pairs.homographies(&name) {
-        Ok(h) => Some(h),
-        Err(e) => {
-            let needed = !left_tags.is_empty()
-                || !right_tags.is_empty()
-                || [MaskKind::Water, MaskKind::Tree, MaskKind::Building]
-                    .iter()
-                    .any(|k| opts.masks.dir(*k).is_some());
-            if needed {
-                return Err(e);
+/// What one pair is built from: its rectified frame, its accepted synthetic variants, their
+/// crops and the pair's homographies.
+struct PairInputs {
+    /// `<left id>-<right id>`.
+    name: String,
+    pairs: PairFolder,
+    /// The frame every rectified file must have.
+    size: (usize, usize),
+    /// Accepted variant tags of the left and the right image.
+    tags: [Vec<String>; 2],
+    /// The crop each side's variants were made on, if any.
+    crop: [Option<CropRecord>; 2],
+    /// `None` only when nothing needs them (no variants, no masks).
+    homographies: Option<(Homography, Homography)>,
+}
+
+impl PairInputs {
+    fn read(
+        opts: &BuildOptions,
+        synthetic: Option<&SyntheticLayout>,
+        pair: &PairStem,
+    ) -> Result<Self> {
+        let name = pair.base_name();
+        let pairs = PairFolder::new(&opts.pairs_dir);
+        let size = pairs.size(&name)?;
+        let accepted = match synthetic {
+            Some(s) => accepted_tags(s, pair)?,
+            None => Default::default(),
+        };
+        let tags = Side::BOTH.map(|side| accepted.get(side.dir()).cloned().unwrap_or_default());
+        let crop_of = |side: Side| -> Result<Option<CropRecord>> {
+            match synthetic {
+                Some(s) => s.read_crop(side_id(pair, side)),
+                None => Ok(None),
             }
-            None
-        }
-    };
+        };
+        let crop = [crop_of(Side::Left)?, crop_of(Side::Right)?];
+        let homographies = match pairs.homographies(&name) {
+            Ok(h) => Some(h),
+            Err(e) => {
+                let needed = tags.iter().any(|t| !t.is_empty())
+                    || [MaskKind::Water, MaskKind::Tree, MaskKind::Building]
+                        .iter()
+                        .any(|k| opts.masks.dir(*k).is_some());
+                if needed {
+                    return Err(e);
+                }
+                None
+            }
+        };
+        Ok(PairInputs {
+            name,
+            pairs,
+            size,
+            tags,
+            crop,
+            homographies,
+        })
+    }
 
-    // Shared geometry: homographies and masks.
-    if let Some((hl, hr)) = &homographies {
-        let adapt = |c: &Option<CropRecord>, h: &Homography| c.map_or(*h, |c| c.adapt(h));
+    /// The homography of `side`, adapted to its variants' crop.
+    fn cropped_homography(&self, side: usize) -> Option<Homography> {
+        let h = self
+            .homographies
+            .as_ref()
+            .map(|(l, r)| if side == 0 { *l } else { *r });
+        h.map(|h| self.crop[side].map_or(h, |c| c.adapt(&h)))
+    }
+}
+
+/// The geometry both sides share: the (cropped) homographies and each side's masks. Returns
+/// the segmentations that were missing.
+fn write_geometry(
+    opts: &BuildOptions,
+    layout: &TrainLayout,
+    pair: &PairStem,
+    inputs: &PairInputs,
+) -> Result<Vec<String>> {
+    if inputs.homographies.is_some() {
         let out = layout.homography(pair);
         if !out.is_file() {
-            write_homographies(&out, &adapt(&crop[0], hl), &adapt(&crop[1], hr))?;
+            let (hl, hr) = (inputs.cropped_homography(0), inputs.cropped_homography(1));
+            write_homographies(&out, &hl.expect("known"), &hr.expect("known"))?;
         }
     }
     let mut missing_masks = Vec::new();
     for (i, side) in Side::BOTH.into_iter().enumerate() {
-        let h = homographies
-            .as_ref()
-            .map(|(l, r)| if i == 0 { *l } else { *r });
-        let h_crop = h.map(|h| crop[i].map_or(h, |c| c.adapt(&h)));
         write_side_masks(
             opts,
             layout,
             pair,
             side,
-            h_crop,
-            crop[i],
-            size,
+            inputs.cropped_homography(i),
+            inputs.crop[i],
+            inputs.size,
             &mut missing_masks,
         )?;
     }
+    Ok(missing_masks)
+}
 
-    // Disparities.
+/// The teacher's disparity, and the LiDAR one for training splits when there is one.
+fn copy_disparities(
+    opts: &BuildOptions,
+    layout: &TrainLayout,
+    pair: &PairStem,
+    inputs: &PairInputs,
+) -> Result<()> {
+    let name = &inputs.name;
     copy_disparity(
         &opts.teacher_dir.join(format!("{name}.iio")),
         &layout.teacher(pair),
-        size,
+        inputs.size,
         "teacher disparity: run `seasonstereo teacher` on the synchronic pairs",
     )?;
     if let (Some(src), Some(dst)) = (&opts.lidar_dir, layout.lidar(pair)) {
@@ -416,17 +491,30 @@ fn build_pair(
             copy_disparity(
                 &src.join(format!("{name}.iio")),
                 &dst,
-                size,
+                inputs.size,
                 "LiDAR disparity of the pair",
             )?;
         }
     }
+    Ok(())
+}
 
-    // Combinations.
+/// Writes the images of every combination of the pair's real and synthetic sides that is not
+/// there yet, one combination per unit of `budget`. Returns the number of combinations, or
+/// `None` when the budget ran out first.
+fn write_combinations(
+    opts: &BuildOptions,
+    layout: &TrainLayout,
+    synthetic: Option<&SyntheticLayout>,
+    pair: &PairStem,
+    inputs: &PairInputs,
+    summary: &mut BuildSummary,
+    budget: &mut Option<usize>,
+) -> Result<Option<usize>> {
     let variants = PairVariants {
         pair: pair.clone(),
-        left_tags: left_tags.clone(),
-        right_tags: right_tags.clone(),
+        left_tags: inputs.tags[0].clone(),
+        right_tags: inputs.tags[1].clone(),
     };
     let mut cache: HashMap<(Side, Option<String>), Image> = HashMap::new();
     let mut source = |side: Side, tag: &Option<String>| -> Result<Image> {
@@ -434,15 +522,7 @@ fn build_pair(
         if let Some(im) = cache.get(&key) {
             return Ok(im.clone());
         }
-        let im = match tag {
-            None => real_image(&pairs, pair, side)?,
-            Some(t) => {
-                let s = synthetic.expect("tags come from the synthetic folder");
-                let (hl, hr) = homographies.expect("checked above");
-                let h = if side == Side::Left { hl } else { hr };
-                rectified_variant(s, pair, side, t, &h, size)?
-            }
-        };
+        let im = side_image(synthetic, pair, inputs, side, tag)?;
         cache.insert(key, im.clone());
         Ok(im)
     };
@@ -461,7 +541,7 @@ fn build_pair(
             continue;
         }
         if *budget == Some(0) {
-            return Ok(false);
+            return Ok(None);
         }
         for (side, path, tag) in &files {
             if !path.is_file() {
@@ -478,40 +558,47 @@ fn build_pair(
             *b -= 1;
         }
     }
+    Ok(Some(combos.len()))
+}
 
-    let rejected = match synthetic {
-        Some(s) => {
-            let mut out = Vec::new();
-            for side in Side::BOTH {
-                let id = side_id(pair, side);
-                if let Some(r) = s.read_variants(id)? {
-                    out.extend(
-                        r.seasons
-                            .iter()
-                            .filter(|x| !x.passed)
-                            .map(|x| format!("{id}_{}", x.season)),
-                    );
-                }
-            }
-            out
+/// One side's image of a combination: the real rectified one, or the variant `tag` rectified
+/// into the pair's frame.
+fn side_image(
+    synthetic: Option<&SyntheticLayout>,
+    pair: &PairStem,
+    inputs: &PairInputs,
+    side: Side,
+    tag: &Option<String>,
+) -> Result<Image> {
+    match tag {
+        None => real_image(&inputs.pairs, pair, side),
+        Some(t) => {
+            let s = synthetic.expect("tags come from the synthetic folder");
+            let (hl, hr) = inputs.homographies.expect("checked above");
+            let h = if side == Side::Left { hl } else { hr };
+            rectified_variant(s, pair, side, t, &h, inputs.size)
         }
-        None => Vec::new(),
+    }
+}
+
+/// The variants the synthesis rejected, `<image id>_<season>`, for the pair's record.
+fn rejected_variants(synthetic: Option<&SyntheticLayout>, pair: &PairStem) -> Result<Vec<String>> {
+    let Some(s) = synthetic else {
+        return Ok(Vec::new());
     };
-    let record = PairRecord {
-        pair: name,
-        left_tags,
-        right_tags,
-        combinations: combos.len(),
-        missing_masks,
-        rejected,
-        width: size.0,
-        height: size.1,
-    };
-    crate::stage::write_json(
-        &record_path(&layout.root, pair),
-        &serde_json::to_value(&record)?,
-    )?;
-    Ok(true)
+    let mut out = Vec::new();
+    for side in Side::BOTH {
+        let id = side_id(pair, side);
+        if let Some(r) = s.read_variants(id)? {
+            out.extend(
+                r.seasons
+                    .iter()
+                    .filter(|x| !x.passed)
+                    .map(|x| format!("{id}_{}", x.season)),
+            );
+        }
+    }
+    Ok(out)
 }
 
 fn side_id(pair: &PairStem, side: Side) -> &str {
@@ -554,9 +641,36 @@ fn write_side_masks(
     missing: &mut Vec<String>,
 ) -> Result<()> {
     let id = side_id(pair, side);
-    let kinds = [MaskKind::Water, MaskKind::Tree, MaskKind::Building];
     // Missing segmentations are recorded even when the masks exist from an earlier run.
-    let files: Vec<(MaskKind, Option<PathBuf>)> = kinds
+    let files = segmentation_files(opts, id, side, missing);
+    if MaskKind::ALL
+        .iter()
+        .all(|&k| layout.mask(k, side, pair).is_file())
+    {
+        return Ok(());
+    }
+    let (raw_size, segmentations) = read_segmentations(&files, crop, id)?;
+    let footprint = match (raw_size, h_crop) {
+        (Some((w, h)), Some(hc)) => rectify_mask(&Mask::filled(w, h, true), &hc, size)?,
+        _ => finite_pixels(opts, pair, side, size)?,
+    };
+    write_mask(opts, layout, pair, side, MaskKind::Valid, &footprint)?;
+    for (kind, seg) in segmentations {
+        let m = class_mask(pair, kind, seg, h_crop, size, &footprint)?;
+        write_mask(opts, layout, pair, side, kind, &m)?;
+    }
+    Ok(())
+}
+
+/// Each class's segmentation of image `id`, when its folder has one; the missing ones are
+/// added to `missing` with the folder they were looked for in.
+fn segmentation_files(
+    opts: &BuildOptions,
+    id: &str,
+    side: Side,
+    missing: &mut Vec<String>,
+) -> Vec<(MaskKind, Option<PathBuf>)> {
+    [MaskKind::Water, MaskKind::Tree, MaskKind::Building]
         .iter()
         .map(|&k| {
             let f = opts
@@ -577,93 +691,113 @@ fn write_side_masks(
             }
             (k, f)
         })
-        .collect();
-    let outputs: Vec<PathBuf> = MaskKind::ALL
-        .iter()
-        .map(|&k| layout.mask(k, side, pair))
-        .collect();
-    if outputs.iter().all(|p| p.is_file()) {
-        return Ok(());
-    }
-    // The raw frame: the crop when synthesize made one, else a segmentation's own size.
+        .collect()
+}
+
+/// Each class's segmentation, when there is one.
+type Segmentations = Vec<(MaskKind, Option<Image>)>;
+
+/// Reads the segmentations in the raw frame of image `id`: the crop when synthesize made one
+/// (a segmentation of the whole raw image is cropped like the image), else the segmentations'
+/// own size, which must agree. Returns the raw frame's size, if known, and each class's
+/// segmentation.
+fn read_segmentations(
+    files: &[(MaskKind, Option<PathBuf>)],
+    crop: Option<CropRecord>,
+    id: &str,
+) -> Result<(Option<(usize, usize)>, Segmentations)> {
     let mut raw_size = crop.map(|c| (c.width, c.height));
     let mut segmentations = Vec::new();
-    for (k, f) in &files {
-        if let Some(p) = f {
-            let mut im = raster::read_image(p)?;
-            // A segmentation of the whole raw image is cropped like the image.
-            if let Some(c) = crop {
-                if im.size() == (c.source_width, c.source_height)
-                    && im.size() != (c.width, c.height)
-                {
-                    im = raster::geometry::crop(&im, c.x0, c.y0, c.width, c.height)?;
-                }
-            }
-            match raw_size {
-                Some(s) if s != im.size() => bail!(
-                    "mask/source size mismatch: {} is {}x{}, image {id} is {}x{} (segment the crops of `synthesize`, OUT/cropped/, or the whole raw image)",
-                    p.display(), im.width(), im.height(), s.0, s.1
-                ),
-                None => raw_size = Some(im.size()),
-                _ => {}
-            }
-            segmentations.push((*k, Some(im)));
-        } else {
+    for (k, f) in files {
+        let Some(p) = f else {
             segmentations.push((*k, None));
-        }
-    }
-    let footprint = match (raw_size, h_crop) {
-        (Some((w, h)), Some(hc)) => rectify_mask(&Mask::filled(w, h, true), &hc, size)?,
-        _ => {
-            // No raw frame known: the finite pixels of the rectified real image.
-            let p = PairFolder::new(&opts.pairs_dir)
-                .image(side, &pair.base_name())?
-                .context("real image vanished")?;
-            let im = raster::read_image(&p)?;
-            let c = im.channels();
-            let data = im
-                .data()
-                .chunks(c)
-                .map(|px| px.iter().all(|v| v.is_finite()))
-                .collect();
-            Mask::new(size.0, size.1, data)?
-        }
-    };
-    let write = |kind: MaskKind, m: &Mask| -> Result<()> {
-        let p = layout.mask(kind, side, pair);
-        write_mask_npy(&p, m)?;
-        if opts.previews {
-            let mut pic = m.to_image();
-            pic.data_mut().iter_mut().for_each(|v| *v *= 255.0);
-            write_png(
-                layout.preview(kind.dir(), side, &pair.base_name()),
-                &pic,
-                PngDepth::Eight,
-            )?;
-        }
-        Ok(())
-    };
-    write(MaskKind::Valid, &footprint)?;
-    for (kind, seg) in segmentations {
-        let polarity = if kind == MaskKind::Building {
-            MaskFile::Building
-        } else {
-            MaskFile::Keep
+            continue;
         };
-        let m = match (seg, h_crop) {
-            (Some(im), Some(hc)) => rectify_mask(&from_segmentation(&im, polarity), &hc, size)?,
-            (Some(im), None) if im.size() == size => {
-                from_segmentation(&im, polarity).and(&footprint)?
+        let mut im = raster::read_image(p)?;
+        if let Some(c) = crop {
+            if im.size() == (c.source_width, c.source_height) && im.size() != (c.width, c.height) {
+                im = raster::geometry::crop(&im, c.x0, c.y0, c.width, c.height)?;
             }
-            (Some(_), None) => bail!(
-                "pair {pair} has no homography to rectify its {} mask",
-                kind.dir()
+        }
+        match raw_size {
+            Some(s) if s != im.size() => bail!(
+                "mask/source size mismatch: {} is {}x{}, image {id} is {}x{} (segment the crops of `synthesize`, OUT/cropped/, or the whole raw image)",
+                p.display(), im.width(), im.height(), s.0, s.1
             ),
-            // Release defaults: keep everything inside the footprint, no building.
-            (None, _) if polarity == MaskFile::Keep => footprint.clone(),
-            (None, _) => Mask::filled(size.0, size.1, false),
-        };
-        write(kind, &m)?;
+            None => raw_size = Some(im.size()),
+            _ => {}
+        }
+        segmentations.push((*k, Some(im)));
+    }
+    Ok((raw_size, segmentations))
+}
+
+/// The footprint when no raw frame is known: the finite pixels of the rectified real image.
+fn finite_pixels(
+    opts: &BuildOptions,
+    pair: &PairStem,
+    side: Side,
+    size: (usize, usize),
+) -> Result<Mask> {
+    let p = PairFolder::new(&opts.pairs_dir)
+        .image(side, &pair.base_name())?
+        .context("real image vanished")?;
+    let im = raster::read_image(&p)?;
+    let c = im.channels();
+    let data = im
+        .data()
+        .chunks(c)
+        .map(|px| px.iter().all(|v| v.is_finite()))
+        .collect();
+    Ok(Mask::new(size.0, size.1, data)?)
+}
+
+/// One class's mask in the rectified frame: its segmentation rectified (or, without a
+/// homography, taken as it is when it already has the frame's size), else the release's
+/// default (keep everything inside the footprint, no building).
+fn class_mask(
+    pair: &PairStem,
+    kind: MaskKind,
+    seg: Option<Image>,
+    h_crop: Option<Homography>,
+    size: (usize, usize),
+    footprint: &Mask,
+) -> Result<Mask> {
+    let polarity = if kind == MaskKind::Building {
+        MaskFile::Building
+    } else {
+        MaskFile::Keep
+    };
+    Ok(match (seg, h_crop) {
+        (Some(im), Some(hc)) => rectify_mask(&from_segmentation(&im, polarity), &hc, size)?,
+        (Some(im), None) if im.size() == size => from_segmentation(&im, polarity).and(footprint)?,
+        (Some(_), None) => bail!(
+            "pair {pair} has no homography to rectify its {} mask",
+            kind.dir()
+        ),
+        (None, _) if polarity == MaskFile::Keep => footprint.clone(),
+        (None, _) => Mask::filled(size.0, size.1, false),
+    })
+}
+
+/// Writes one mask of a side, with its preview when asked.
+fn write_mask(
+    opts: &BuildOptions,
+    layout: &TrainLayout,
+    pair: &PairStem,
+    side: Side,
+    kind: MaskKind,
+    m: &Mask,
+) -> Result<()> {
+    write_mask_npy(&layout.mask(kind, side, pair), m)?;
+    if opts.previews {
+        let mut pic = m.to_image();
+        pic.data_mut().iter_mut().for_each(|v| *v *= 255.0);
+        write_png(
+            layout.preview(kind.dir(), side, &pair.base_name()),
+            &pic,
+            PngDepth::Eight,
+        )?;
     }
     Ok(())
 }
@@ -764,7 +898,9 @@ fn finalize(
         ),
     )?;
     let generator = match &opts.synthetic_dir {
-        Some(d) => crate::synthesize::recorded_generator(d)?.unwrap_or_else(|| "unknown".into()),
+        Some(d) => {
+            crate::stages::synthesize::recorded_generator(d)?.unwrap_or_else(|| "unknown".into())
+        }
         None => "none".into(),
     };
     let mut manifest = Manifest::read_optional(&dir.manifest())?
