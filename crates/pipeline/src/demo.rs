@@ -124,9 +124,8 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
     let context = ReportContext {
         opts,
         pair: &pair,
-        truth_dsm: &truth.files.dsm,
-        winter: &seasons.winter_path,
-        summer: &seasons.summer_path,
+        truth_dsm: truth.files.dsm.clone(),
+        cross_season: [seasons.winter_path.clone(), seasons.summer_path.clone()],
         range,
         generator: format!("built-in appearance model, seed {}", opts.seed),
     };

@@ -1,7 +1,7 @@
 //! The demo's HTML report: the story of one run, section by section, with the commands that
 //! reproduce it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use raster::Image;
@@ -18,9 +18,9 @@ use crate::report::Report;
 pub struct ReportContext<'a> {
     pub opts: &'a DemoOptions,
     pub pair: &'a PairPaths,
-    pub truth_dsm: &'a Path,
-    pub winter: &'a Path,
-    pub summer: &'a Path,
+    pub truth_dsm: PathBuf,
+    /// The winter left and summer right images, as the commands name them.
+    pub cross_season: [PathBuf; 2],
     pub range: (i32, i32),
     pub generator: String,
 }
@@ -330,8 +330,8 @@ fn reproduce(r: &mut Report, c: &ReportContext<'_>) -> Result<()> {
         ),
         format!(
             "seasonstereo predict --range {lo}:{hi}{flags} {} {} -o {out}/prediction_cross_season.iio",
-            c.winter.display(),
-            c.summer.display()
+            c.cross_season[0].display(),
+            c.cross_season[1].display()
         ),
         "# DSMs on the truth's grid (highest point per cell, 32 px border as the benchmark)".to_string(),
         dsm_cmd(&format!("{out}/prediction.iio"), &format!("{out}/dsm/synchronic.tif")),
