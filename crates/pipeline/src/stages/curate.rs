@@ -45,7 +45,7 @@ use crate::pairs::{PairFolder, PairPaths};
 use crate::progress::Progress;
 use crate::report::Report;
 use crate::stage::{run_items, write_json, write_text, BatchSummary};
-use crate::teacher::{self, TeacherRecord};
+use crate::stages::teacher::{self, TeacherRecord};
 use features::FeatureSimilarity;
 use select::{colour_normaliser, colour_score, joint_rank, rank_desc, Keep};
 
@@ -323,6 +323,8 @@ fn fmt(v: Option<f64>) -> String {
     v.map_or(String::new(), |v| format!("{v:.6}"))
 }
 
+/// Ranks the scored pairs, selects the intersection and writes the stage's outputs:
+/// `scores.csv`, `selected.txt`, `selected.csv`, `curate.json` and the report.
 fn rank_and_write(
     opts: &CurateOptions,
     pairs: &[PairPaths],
@@ -330,8 +332,36 @@ fn rank_and_write(
 ) -> Result<Ranking> {
     let (rows, d_max, k) = rank(scores, opts.colour, opts.ssim_scale, opts.keep);
     let out = &opts.out_dir;
-    // scores.csv, one row per pair in stem order.
     let scores_csv = out.join("scores.csv");
+    write_scores_csv(&scores_csv, &rows, d_max)?;
+    let sel = selection_order(&rows);
+    let selected: Vec<String> = sel.iter().map(|r| r.stem.clone()).collect();
+    let selected_txt = out.join("selected.txt");
+    write_text(
+        &selected_txt,
+        &selected
+            .iter()
+            .map(|s| format!("{s}\n"))
+            .collect::<String>(),
+    )?;
+    write_selected_csv(&out.join("selected.csv"), &sel, pairs)?;
+    let feature = rows.first().map(|r| r.feature.clone()).unwrap_or_default();
+    write_curate_json(opts, &rows, k, d_max, selected.len(), &feature)?;
+    let report = out.join("report.html");
+    write_report(&report, &rows, k, d_max, &feature, opts)?;
+    Ok(Ranking {
+        rows,
+        d_max,
+        k,
+        selected,
+        scores_csv,
+        selected_txt,
+        report,
+    })
+}
+
+/// `scores.csv`: one row per pair in stem order, every score and rank.
+fn write_scores_csv(path: &Path, rows: &[RankedPair], d_max: f64) -> Result<()> {
     let header = [
         "stem",
         "status",
@@ -352,7 +382,7 @@ fn rank_and_write(
         "feature",
     ];
     let mut text = header.join(",") + "\n";
-    for r in &rows {
+    for r in rows {
         let rank = |v: Option<usize>| v.map_or(String::new(), |v| v.to_string());
         let cells = [
             r.stem.clone(),
@@ -375,8 +405,11 @@ fn rank_and_write(
         ];
         text += &(cells.join(",") + "\n");
     }
-    write_text(&scores_csv, &text)?;
-    // The intersection, in the release's order: S_feat, then S_comb, descending, then stem.
+    write_text(path, &text)
+}
+
+/// The intersection, in the release's order: S_feat, then S_comb, descending, then stem.
+fn selection_order(rows: &[RankedPair]) -> Vec<&RankedPair> {
     let mut sel: Vec<&RankedPair> = rows.iter().filter(|r| r.selected).collect();
     sel.sort_by(|a, b| {
         let key = |r: &RankedPair| (r.s_feat.unwrap_or(f64::NAN), r.s_comb.unwrap_or(f64::NAN));
@@ -386,19 +419,15 @@ fn rank_and_write(
             .then(cb.total_cmp(&ca))
             .then(a.stem.cmp(&b.stem))
     });
-    let selected: Vec<String> = sel.iter().map(|r| r.stem.clone()).collect();
-    let selected_txt = out.join("selected.txt");
-    write_text(
-        &selected_txt,
-        &selected
-            .iter()
-            .map(|s| format!("{s}\n"))
-            .collect::<String>(),
-    )?;
+    sel
+}
+
+/// `selected.csv`: the selected pairs' images and scores, in selection order.
+fn write_selected_csv(path: &Path, sel: &[&RankedPair], pairs: &[PairPaths]) -> Result<()> {
     let by_stem: std::collections::HashMap<&str, &PairPaths> =
         pairs.iter().map(|p| (p.stem.as_str(), p)).collect();
     let mut csv = String::from("id,left,right,s_feat,s_comb,rank_feat,rank_comb\n");
-    for r in &sel {
+    for r in sel {
         let p = by_stem[r.stem.as_str()];
         csv += &format!(
             "{},{},{},{},{},{},{}\n",
@@ -411,18 +440,29 @@ fn rank_and_write(
             r.rank_comb.unwrap_or(0)
         );
     }
-    write_text(&out.join("selected.csv"), &csv)?;
-    let feature = rows.first().map(|r| r.feature.clone()).unwrap_or_default();
+    write_text(path, &csv)
+}
+
+/// `curate.json`: the counts and the definition of every score, for whoever reads the
+/// selection later.
+fn write_curate_json(
+    opts: &CurateOptions,
+    rows: &[RankedPair],
+    k: usize,
+    d_max: f64,
+    selected: usize,
+    feature: &str,
+) -> Result<()> {
     let ranked = rows.iter().filter(|r| r.joint_rank.is_some()).count();
     write_json(
-        &out.join("curate.json"),
+        &opts.out_dir.join("curate.json"),
         &json!({
             "pairs": rows.len(),
             "ranked": ranked,
             "unscored": rows.len() - ranked,
             "keep": opts.keep.describe(),
             "k": k,
-            "selected": selected.len(),
+            "selected": selected,
             "d_max": d_max,
             "d_max_definition": "95th percentile of d_color over all scored pairs, numpy 'linear' interpolation; 1 if not positive",
             "d_color": match opts.colour {
@@ -439,18 +479,7 @@ fn rank_and_write(
             "teacher": teacher_record(&opts.teacher_dir)?,
             "epe_filter": "not applied (no LiDAR disparity)",
         }),
-    )?;
-    let report = out.join("report.html");
-    write_report(&report, &rows, k, d_max, &feature, opts)?;
-    Ok(Ranking {
-        rows,
-        d_max,
-        k,
-        selected,
-        scores_csv,
-        selected_txt,
-        report,
-    })
+    )
 }
 
 fn csv_quote(s: &str) -> String {
