@@ -33,12 +33,12 @@ use raster::{Homography, Image};
 use synth::BuiltinSeasons;
 use world::{class, WorldParams};
 
-use crate::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
-use crate::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter};
 use crate::matcher::Matcher;
 use crate::progress::Progress;
-use crate::synthesize::{run_synthesize, SynthesizeOptions, SynthesizeSummary};
-use crate::teacher::{run_teacher, TeacherOptions};
+use crate::stages::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
+use crate::stages::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter};
+use crate::stages::synthesize::{run_synthesize, SynthesizeOptions, SynthesizeSummary};
+use crate::stages::teacher::{run_teacher, TeacherOptions};
 
 /// What `dataset world` builds.
 #[derive(Clone, Debug)]
@@ -84,7 +84,7 @@ impl WorldTrainingOptions {
             seed: 1,
             generator_seed: 0,
             subset_seed: 0,
-            crop: crate::synthesize::DEFAULT_CROP,
+            crop: crate::stages::synthesize::DEFAULT_CROP,
             sgm: SgmParams::default(),
             previews: false,
             masks: WorldMasks::Exact,
@@ -120,15 +120,7 @@ pub fn build_world_training(
     opts: &WorldTrainingOptions,
     progress: &dyn Progress,
 ) -> Result<WorldTrainingSummary> {
-    if opts.train_worlds == 0 {
-        bail!("at least one training world is needed");
-    }
-    if opts.size < 64 {
-        bail!(
-            "worlds of {} px are too small to train on (64 or more)",
-            opts.size
-        );
-    }
+    check_world_options(opts)?;
     let range = world_range(opts.size);
     let mut summary = WorldTrainingSummary {
         range,
@@ -141,75 +133,7 @@ pub fn build_world_training(
         if count == 0 {
             continue;
         }
-        let src = opts.out_dir.join("sources").join(split);
-        let seeds: Vec<u64> = (first..first + count as u64).collect();
-        progress.begin(&format!("worlds ({split})"), seeds.len());
-        for (k, &seed) in seeds.iter().enumerate() {
-            write_world_sources(&src, opts.size, seed)?;
-            progress.advance(k + 1);
-        }
-        progress.end();
-        let pairs = src.join("pairs");
-        let truth = src.join("truth");
-        let teacher_dir = if split == "train" {
-            let t = src.join("teacher");
-            run_teacher(
-                &TeacherOptions {
-                    pairs_dir: pairs.clone(),
-                    out_dir: t.clone(),
-                    matcher: Matcher::Classical(opts.sgm.clone()),
-                    range: Some(range),
-                    shard: Shard::ALL,
-                },
-                progress,
-            )?;
-            t
-        } else {
-            truth.clone()
-        };
-        let mut syn = SynthesizeOptions::new(&pairs, &src.join("raw"), &src.join("synthetic"));
-        syn.classes_dir = Some(src.join("classes"));
-        syn.crop = opts.crop;
-        let generator = BuiltinSeasons::new(opts.generator_seed);
-        let syn_summary = run_synthesize(&syn, &generator, progress)?;
-        let mut b = BuildOptions::new(&pairs, &teacher_dir, &opts.out_dir);
-        b.synthetic_dir = Some(src.join("synthetic"));
-        match opts.masks {
-            WorldMasks::Exact => {
-                b.masks = MaskDirs::release(&src.join("masks"));
-                b.segmenter = "world classes (exact)".into();
-            }
-            WorldMasks::Segmenter => {
-                let segmenter = OfflineSegmenter::default();
-                b.segmenter = segmenter.name();
-                let out_dir = src.join("segmentation");
-                run_masks(
-                    &MasksOptions {
-                        images_dir: src.join("raw"),
-                        out_dir: out_dir.clone(),
-                        shard: Shard::ALL,
-                        segmenter: Box::new(segmenter),
-                    },
-                    progress,
-                )?;
-                b.masks = MaskDirs::release(&out_dir);
-            }
-        }
-        b.teacher_name = Some(if split == "train" {
-            "sgm".into()
-        } else {
-            "GT".into()
-        });
-        b.lidar_dir = Some(truth);
-        b.split = split.into();
-        b.seed = opts.subset_seed;
-        b.previews = opts.previews;
-        let build = run_build(&b, progress)?;
-        let s = SplitSummary {
-            worlds: count,
-            synthesize: syn_summary,
-            build,
-        };
+        let s = build_split(opts, split, count, first, range, progress)?;
         if split == "train" {
             summary.train = s;
         } else {
@@ -217,6 +141,122 @@ pub fn build_world_training(
         }
     }
     Ok(summary)
+}
+
+/// Refuses a set that could not train anything.
+fn check_world_options(opts: &WorldTrainingOptions) -> Result<()> {
+    if opts.train_worlds == 0 {
+        bail!("at least one training world is needed");
+    }
+    if opts.size < 64 {
+        bail!(
+            "worlds of {} px are too small to train on (64 or more)",
+            opts.size
+        );
+    }
+    Ok(())
+}
+
+/// One split through the real stages: `count` worlds from seed `first` written as sources,
+/// their disparities, their seasonal variants, their masks and the dataset build.
+fn build_split(
+    opts: &WorldTrainingOptions,
+    split: &str,
+    count: usize,
+    first: u64,
+    range: (i32, i32),
+    progress: &dyn Progress,
+) -> Result<SplitSummary> {
+    let src = opts.out_dir.join("sources").join(split);
+    let seeds: Vec<u64> = (first..first + count as u64).collect();
+    progress.begin(&format!("worlds ({split})"), seeds.len());
+    for (k, &seed) in seeds.iter().enumerate() {
+        write_world_sources(&src, opts.size, seed)?;
+        progress.advance(k + 1);
+    }
+    progress.end();
+    let pairs = src.join("pairs");
+    let truth = src.join("truth");
+    let teacher_dir = if split == "train" {
+        run_world_teacher(opts, &src, range, progress)?
+    } else {
+        truth.clone()
+    };
+    let mut syn = SynthesizeOptions::new(&pairs, &src.join("raw"), &src.join("synthetic"));
+    syn.classes_dir = Some(src.join("classes"));
+    syn.crop = opts.crop;
+    let generator = BuiltinSeasons::new(opts.generator_seed);
+    let syn_summary = run_synthesize(&syn, &generator, progress)?;
+    let mut b = BuildOptions::new(&pairs, &teacher_dir, &opts.out_dir);
+    b.synthetic_dir = Some(src.join("synthetic"));
+    (b.masks, b.segmenter) = world_masks(opts.masks, &src, progress)?;
+    b.teacher_name = Some(if split == "train" {
+        "sgm".into()
+    } else {
+        "GT".into()
+    });
+    b.lidar_dir = Some(truth);
+    b.split = split.into();
+    b.seed = opts.subset_seed;
+    b.previews = opts.previews;
+    let build = run_build(&b, progress)?;
+    Ok(SplitSummary {
+        worlds: count,
+        synthesize: syn_summary,
+        build,
+    })
+}
+
+/// The training split's teacher disparities: the classical matcher over the worlds' range,
+/// as on real pairs. Returns their folder.
+fn run_world_teacher(
+    opts: &WorldTrainingOptions,
+    src: &Path,
+    range: (i32, i32),
+    progress: &dyn Progress,
+) -> Result<PathBuf> {
+    let t = src.join("teacher");
+    run_teacher(
+        &TeacherOptions {
+            pairs_dir: src.join("pairs"),
+            out_dir: t.clone(),
+            matcher: Matcher::Classical(opts.sgm.clone()),
+            range: Some(range),
+            shard: Shard::ALL,
+        },
+        progress,
+    )?;
+    Ok(t)
+}
+
+/// The masks' folders and the segmenter's name: the worlds' exact classes, or the `masks`
+/// stage's offline segmenter run on the raw images.
+fn world_masks(
+    masks: WorldMasks,
+    src: &Path,
+    progress: &dyn Progress,
+) -> Result<(MaskDirs, String)> {
+    match masks {
+        WorldMasks::Exact => Ok((
+            MaskDirs::release(&src.join("masks")),
+            "world classes (exact)".into(),
+        )),
+        WorldMasks::Segmenter => {
+            let segmenter = OfflineSegmenter::default();
+            let name = segmenter.name();
+            let out_dir = src.join("segmentation");
+            run_masks(
+                &MasksOptions {
+                    images_dir: src.join("raw"),
+                    out_dir: out_dir.clone(),
+                    shard: Shard::ALL,
+                    segmenter: Box::new(segmenter),
+                },
+                progress,
+            )?;
+            Ok((MaskDirs::release(&out_dir), name))
+        }
+    }
 }
 
 /// The disparity search range of the worlds of `size` (the same for every seed).
