@@ -13,42 +13,21 @@
 
 pub mod appearance;
 pub mod camera;
+pub mod class;
 pub mod noise;
 pub mod render;
+mod row;
 pub mod scene;
+mod shadow;
 
 use rayon::prelude::*;
 
 pub use appearance::{Appearance, Lighting, Neutral};
 pub use camera::{AffineCamera, GeoFrame, ViewCamera};
 use raster::{Homography, Image, Mask};
-use render::{point_at, rasterise, span_at, visible_spans, Piece, Profile, Span};
+use row::{RowOut, RowRenderer, RowView};
 pub use scene::{Scene, SceneParams, Surface};
-
-/// OpenEarthMap class ids, as used by the SegFormer masks of the method.
-pub mod class {
-    pub const BACKGROUND: u8 = 0;
-    pub const BARELAND: u8 = 1;
-    pub const RANGELAND: u8 = 2;
-    pub const DEVELOPED: u8 = 3;
-    pub const ROAD: u8 = 4;
-    pub const TREE: u8 = 5;
-    pub const WATER: u8 = 6;
-    pub const AGRICULTURE: u8 = 7;
-    pub const BUILDING: u8 = 8;
-    /// Names indexed by id.
-    pub const NAMES: [&str; 9] = [
-        "background",
-        "bareland",
-        "rangeland",
-        "developed space",
-        "road",
-        "tree",
-        "water",
-        "agriculture land",
-        "building",
-    ];
-}
+use shadow::ShadowGrid;
 
 /// Everything that defines a world; the same parameters always give the same world.
 #[derive(Clone, Debug, PartialEq)]
@@ -178,99 +157,6 @@ impl World {
     }
 }
 
-/// Output of one rendered row.
-struct RowOut {
-    left: Vec<[f32; 3]>,
-    right: Vec<[f32; 3]>,
-    left_truth: Vec<(f32, u8)>,
-    right_truth: Vec<(f32, u8)>,
-    disparity: Vec<f32>,
-    occluded: Vec<bool>,
-}
-
-/// Where the sun's shadows fall: for every cell of a 1-pixel grid around the image, the altitude
-/// below which a point there is in shadow (the highest sun ray grazing an obstacle towards the sun).
-/// One march per cell instead of one per sample makes large worlds cheap to light.
-struct ShadowGrid {
-    x0: f64,
-    y0: f64,
-    width: usize,
-    height: usize,
-    threshold: Vec<f32>,
-}
-
-impl ShadowGrid {
-    fn new(
-        scene: &Scene,
-        (x0, y0): (f64, f64),
-        (width, height): (usize, usize),
-        light: &Lighting,
-        max_z: f64,
-    ) -> Self {
-        let z: Vec<f32> = (0..height)
-            .into_par_iter()
-            .flat_map_iter(|j| {
-                (0..width).map(move |i| scene.surface(x0 + i as f64, y0 + j as f64).height)
-            })
-            .collect();
-        let horiz = light.sun[0].hypot(light.sun[1]);
-        let (dx, dy) = if horiz > 1e-9 {
-            (light.sun[0] / horiz, light.sun[1] / horiz)
-        } else {
-            (0.0, 0.0)
-        };
-        // Metres the sun ray climbs per pixel travelled towards the sun.
-        let rise = if horiz > 1e-9 {
-            light.sun[2] / horiz * scene.params().gsd
-        } else {
-            f64::INFINITY
-        };
-        let lowest = z.iter().copied().fold(f32::INFINITY, f32::min) as f64;
-        let reach = if rise.is_finite() {
-            ((max_z - lowest) / rise).ceil() as usize
-        } else {
-            0
-        };
-        let at = |i: f64, j: f64| -> f32 {
-            let (i, j) = (i.round(), j.round());
-            if i < 0.0 || j < 0.0 || i >= width as f64 || j >= height as f64 {
-                return f32::NEG_INFINITY;
-            }
-            z[j as usize * width + i as usize]
-        };
-        let threshold = (0..height)
-            .into_par_iter()
-            .flat_map_iter(|j| {
-                let at = &at;
-                (0..width).map(move |i| {
-                    (1..=reach)
-                        .map(|t| {
-                            let t = t as f64;
-                            at(i as f64 + t * dx, j as f64 + t * dy) - (t * rise) as f32
-                        })
-                        .fold(f32::NEG_INFINITY, f32::max)
-                })
-            })
-            .collect();
-        ShadowGrid {
-            x0,
-            y0,
-            width,
-            height,
-            threshold,
-        }
-    }
-
-    /// True when the point (x, y) at altitude z is in the shadow of something towards the sun.
-    fn shadowed(&self, x: f64, y: f64, z: f64) -> bool {
-        let (i, j) = ((x - self.x0).round(), (y - self.y0).round());
-        if i < 0.0 || j < 0.0 || i >= self.width as f64 || j >= self.height as f64 {
-            return false;
-        }
-        self.threshold[j as usize * self.width + i as usize] as f64 > z + 0.05
-    }
-}
-
 /// Generates the world described by `params`, coloured by `appearance`; `progress(rows_done, rows)`
 /// is called as rows complete.
 pub fn generate(
@@ -280,150 +166,35 @@ pub fn generate(
 ) -> Result<World, String> {
     params.check()?;
     let (w, h) = (params.width, params.height);
-    let gsd = params.scene.gsd;
-    let max_slope = params.left.slope.abs().max(params.right.slope.abs());
-    let max_z = params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
-    let margin =
-        (max_slope * max_z + params.left.offset.abs().max(params.right.offset.abs()) + 4.0).ceil();
-    let (x_lo, x_hi) = (-margin, w as f64 + margin);
+    let extent = Extent::of(params);
     let light = Lighting::from_angles(
         params.sun_elevation_deg,
         params.sun_azimuth_deg,
         params.ambient,
     );
-    let shadow_pad = (max_z / params.sun_elevation_deg.to_radians().tan() / gsd)
-        .ceil()
-        .min(400.0);
-    let scene = Scene::new(
-        params.scene.clone(),
-        x_lo - shadow_pad,
-        x_hi + shadow_pad,
-        -shadow_pad,
-        h as f64 + shadow_pad,
-    );
-
-    let grid = ShadowGrid::new(
-        &scene,
-        (x_lo - shadow_pad, -shadow_pad),
-        (
-            (x_hi - x_lo + 2.0 * shadow_pad).ceil() as usize,
-            h + 2 * shadow_pad as usize,
-        ),
-        &light,
-        max_z,
-    );
+    let scene = extent.scene(params);
+    let shadows = extent.shadows(&scene, h, &light);
     let step = 1.0 / params.supersample as f64;
-    let n = ((x_hi - x_lo) / step).round() as usize;
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let rows: Vec<RowOut> = (0..h)
-        .into_par_iter()
-        .map(|row| {
-            let y = row as f64;
-            let surfaces: Vec<Surface> = (0..n)
-                .map(|k| scene.surface(x_lo + (k as f64 + 0.5) * step, y))
-                .collect();
-            let colours: Vec<[f32; 3]> = surfaces
-                .iter()
-                .enumerate()
-                .map(|(k, s)| {
-                    let x = x_lo + (k as f64 + 0.5) * step;
-                    let shadow = grid.shadowed(x, y, s.height as f64);
-                    let normal = s.normal.map(|v| v as f64);
-                    appearance.surface(s, light.direct(normal, shadow), light.ambient)
-                })
-                .collect();
-            let profile = Profile::new(x_lo, step, &surfaces, &colours);
-            let render_view = |cam: &ViewCamera| {
-                let spans = visible_spans(&profile, cam);
-                let facing = [-cam.slope.signum(), 0.0, 0.0];
-                let wall_direct = light.direct(facing, false);
-                let pixels = rasterise(&profile, cam, &spans, w, |owner, foot, z| {
-                    let above = (z - surfaces[foot].height as f64) as f32;
-                    appearance.wall(&surfaces[owner], above, wall_direct, light.ambient)
-                });
-                (spans, pixels)
-            };
-            let (left_spans, left_px) = render_view(&params.left);
-            let (right_spans, right_px) = render_view(&params.right);
-            let truth = |cam: &ViewCamera, spans: &[Span]| -> Vec<Option<(f64, f64, u8)>> {
-                (0..w)
-                    .map(|u| {
-                        let i = span_at(spans, u as f64)?;
-                        let (x, z) = point_at(&profile, cam, &spans[i], u as f64);
-                        let class = match spans[i].piece {
-                            Piece::Flat(k) => surfaces[k].class,
-                            Piece::Wall { owner, .. } => surfaces[owner].class,
-                        };
-                        Some((x, z, class))
-                    })
-                    .collect()
-            };
-            let left_truth = truth(&params.left, &left_spans);
-            let right_truth = truth(&params.right, &right_spans);
-            let mut disparity = Vec::with_capacity(w);
-            let mut occluded = Vec::with_capacity(w);
-            for (u, t) in left_truth.iter().enumerate() {
-                let Some((x, z, _)) = *t else {
-                    disparity.push(f32::NAN);
-                    occluded.push(true);
-                    continue;
-                };
-                let ur = params.right.column(x, z);
-                disparity.push((u as f64 - ur) as f32);
-                let seen = ur >= -0.5
-                    && ur < w as f64 - 0.5
-                    && span_at(&right_spans, ur).is_some_and(|i| {
-                        let (xr, zr) = point_at(&profile, &params.right, &right_spans[i], ur);
-                        (xr - x).abs() < 1e-4 && (zr - z).abs() < 1e-4
-                    });
-                occluded.push(!seen);
-            }
-            let pack = |t: Vec<Option<(f64, f64, u8)>>| {
-                t.into_iter()
-                    .map(|v| v.map_or((f32::NAN, class::BACKGROUND), |(_, z, c)| (z as f32, c)))
-                    .collect()
-            };
-            let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(k, h);
-            RowOut {
-                left: left_px,
-                right: right_px,
-                left_truth: pack(left_truth),
-                right_truth: pack(right_truth),
-                disparity,
-                occluded,
-            }
-        })
-        .collect();
+    let renderer = RowRenderer {
+        scene: &scene,
+        shadows: &shadows,
+        appearance,
+        light: &light,
+        left: &params.left,
+        right: &params.right,
+        width: w,
+        x_lo: extent.x_lo,
+        step,
+        samples: ((extent.x_hi - extent.x_lo) / step).round() as usize,
+    };
+    let rows = render_rows(&renderer, h, progress);
 
     let seed = params.scene.seed;
-    let sensor = |which: u64, px: &dyn Fn(&RowOut) -> &Vec<[f32; 3]>| -> Image {
-        let mut data = Vec::with_capacity(w * h * 3);
-        for (row, r) in rows.iter().enumerate() {
-            for (x, c) in px(r).iter().enumerate() {
-                let mut rng = noise::Stream::new(noise::hash2(seed ^ which, x as i64, row as i64));
-                for v in c {
-                    let dn = 255.0 * 1.1 * v + params.noise_dn * rng.normal() as f32;
-                    data.push(dn.round().clamp(0.0, 255.0));
-                }
-            }
-        }
-        Image::new(w, h, 3, data).expect("sizes match")
-    };
-    let truth_image = |f: &dyn Fn(&RowOut) -> Vec<f32>| -> Image {
-        Image::new(w, h, 1, rows.iter().flat_map(f).collect()).expect("sizes match")
-    };
-    let left = View {
-        image: sensor(0x1EF7, &|r| &r.left),
-        height: truth_image(&|r| r.left_truth.iter().map(|t| t.0).collect()),
-        classes: truth_image(&|r| r.left_truth.iter().map(|t| t.1 as f32).collect()),
-    };
-    let right = View {
-        image: sensor(0x2167, &|r| &r.right),
-        height: truth_image(&|r| r.right_truth.iter().map(|t| t.0).collect()),
-        classes: truth_image(&|r| r.right_truth.iter().map(|t| t.1 as f32).collect()),
-    };
-    let disparity = truth_image(&|r| r.disparity.clone());
+    let left_rows: Vec<&RowView> = rows.iter().map(|r| &r.left).collect();
+    let right_rows: Vec<&RowView> = rows.iter().map(|r| &r.right).collect();
+    let left = View::from_rows(&left_rows, w, seed ^ 0x1EF7, params.noise_dn);
+    let right = View::from_rows(&right_rows, w, seed ^ 0x2167, params.noise_dn);
+    let disparity = truth_image(w, h, rows.iter().flat_map(|r| r.disparity.iter().copied()));
     let occluded = Mask::new(
         w,
         h,
@@ -432,39 +203,14 @@ pub fn generate(
             .collect(),
     )
     .expect("sizes match");
-
-    let ortho: Vec<Surface> = (0..h)
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            let scene = &scene;
-            (0..w).map(move |x| scene.surface(x as f64, y as f64))
-        })
-        .collect();
-    let ortho_height =
-        Image::new(w, h, 1, ortho.iter().map(|s| s.height).collect()).expect("sizes match");
-    let ortho_classes =
-        Image::new(w, h, 1, ortho.iter().map(|s| s.class as f32).collect()).expect("sizes match");
+    let (ortho_height, ortho_classes) = ortho_truth(&scene, w, h);
 
     let geo = GeoFrame {
         lon0: params.lon0,
         lat0: params.lat0,
-        gsd,
+        gsd: params.scene.gsd,
     };
-    let mut rng = noise::Stream::new(seed ^ 0x4E0);
-    let mut rectifying = || {
-        // Raw images are rotated by a few degrees and shifted: raw → rectified is the inverse motion.
-        let a = rng.range(-4.0, 4.0f64).to_radians();
-        let (tx, ty) = (rng.range(-15.0, 15.0), rng.range(-15.0, 15.0));
-        let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
-        let (c, s) = (a.cos(), a.sin());
-        Homography([
-            [c, -s, cx - c * cx + s * cy + tx],
-            [s, c, cy - s * cx - c * cy + ty],
-            [0.0, 0.0, 1.0],
-        ])
-    };
-    let rectify_left = rectifying();
-    let rectify_right = rectifying();
+    let (rectify_left, rectify_right) = rectifying_homographies(seed, w, h);
     Ok(World {
         camera_left: AffineCamera::from_view(&params.left, &geo, &rectify_left),
         camera_right: AffineCamera::from_view(&params.right, &geo, &rectify_right),
@@ -480,4 +226,152 @@ pub fn generate(
         geo,
         appearance: appearance.name().to_string(),
     })
+}
+
+/// The ground the renderer needs: the image columns plus a margin holding every point a view can
+/// see up to the scene's highest altitude, and around it a pad from which shadows can fall in.
+struct Extent {
+    x_lo: f64,
+    x_hi: f64,
+    /// Highest altitude any surface can have, metres.
+    max_z: f64,
+    /// Ground pixels beyond the margin whose obstacles can shadow the image (sun-dependent).
+    shadow_pad: f64,
+}
+
+impl Extent {
+    fn of(params: &WorldParams) -> Self {
+        let max_slope = params.left.slope.abs().max(params.right.slope.abs());
+        let max_z = params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
+        let margin =
+            (max_slope * max_z + params.left.offset.abs().max(params.right.offset.abs()) + 4.0)
+                .ceil();
+        let shadow_pad = (max_z / params.sun_elevation_deg.to_radians().tan() / params.scene.gsd)
+            .ceil()
+            .min(400.0);
+        Extent {
+            x_lo: -margin,
+            x_hi: params.width as f64 + margin,
+            max_z,
+            shadow_pad,
+        }
+    }
+
+    /// The scene laid out over the extent and its shadow pad.
+    fn scene(&self, params: &WorldParams) -> Scene {
+        let pad = self.shadow_pad;
+        Scene::new(
+            params.scene.clone(),
+            self.x_lo - pad,
+            self.x_hi + pad,
+            -pad,
+            params.height as f64 + pad,
+        )
+    }
+
+    /// The shadow grid over the extent and its pad, for an image `height` rows tall.
+    fn shadows(&self, scene: &Scene, height: usize, light: &Lighting) -> ShadowGrid {
+        let pad = self.shadow_pad;
+        ShadowGrid::new(
+            scene,
+            (self.x_lo - pad, -pad),
+            (
+                (self.x_hi - self.x_lo + 2.0 * pad).ceil() as usize,
+                height + 2 * pad as usize,
+            ),
+            light,
+            self.max_z,
+        )
+    }
+}
+
+/// Renders the `height` rows in parallel, reporting each finished row to `progress`.
+fn render_rows(
+    renderer: &RowRenderer,
+    height: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<RowOut> {
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    (0..height)
+        .into_par_iter()
+        .map(|row| {
+            let out = renderer.render(row);
+            let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(k, height);
+            out
+        })
+        .collect()
+}
+
+impl View {
+    /// One view assembled from its rendered rows (`width` pixels each); the sensor noise is
+    /// drawn from `noise_seed`.
+    fn from_rows(rows: &[&RowView], width: usize, noise_seed: u64, noise_dn: f32) -> View {
+        let height = rows.len();
+        View {
+            image: sensor_image(rows, width, noise_seed, noise_dn),
+            height: truth_image(
+                width,
+                height,
+                rows.iter().flat_map(|r| r.truth.iter().map(|t| t.0)),
+            ),
+            classes: truth_image(
+                width,
+                height,
+                rows.iter().flat_map(|r| r.truth.iter().map(|t| t.1 as f32)),
+            ),
+        }
+    }
+}
+
+/// Digital numbers as the sensor records the rows' radiance: scaled, with Gaussian noise whose
+/// stream is keyed by (seed, pixel) so that it does not depend on the rendering order.
+fn sensor_image(rows: &[&RowView], width: usize, noise_seed: u64, noise_dn: f32) -> Image {
+    let mut data = Vec::with_capacity(width * rows.len() * 3);
+    for (row, r) in rows.iter().enumerate() {
+        for (x, c) in r.pixels.iter().enumerate() {
+            let mut rng = noise::Stream::new(noise::hash2(noise_seed, x as i64, row as i64));
+            for v in c {
+                let dn = 255.0 * 1.1 * v + noise_dn * rng.normal() as f32;
+                data.push(dn.round().clamp(0.0, 255.0));
+            }
+        }
+    }
+    Image::new(width, rows.len(), 3, data).expect("sizes match")
+}
+
+/// A one-channel truth image from its values in row order.
+fn truth_image(width: usize, height: usize, values: impl Iterator<Item = f32>) -> Image {
+    Image::new(width, height, 1, values.collect()).expect("sizes match")
+}
+
+/// Altitude and classes seen straight down on the ground grid (the orthophoto truth).
+fn ortho_truth(scene: &Scene, w: usize, h: usize) -> (Image, Image) {
+    let ortho: Vec<Surface> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| (0..w).map(move |x| scene.surface(x as f64, y as f64)))
+        .collect();
+    (
+        truth_image(w, h, ortho.iter().map(|s| s.height)),
+        truth_image(w, h, ortho.iter().map(|s| s.class as f32)),
+    )
+}
+
+/// Raw → rectified homographies of the left and right views, drawn from the seed. Raw images are
+/// rotated by a few degrees and shifted: raw → rectified is the inverse motion.
+fn rectifying_homographies(seed: u64, w: usize, h: usize) -> (Homography, Homography) {
+    let mut rng = noise::Stream::new(seed ^ 0x4E0);
+    let mut rectifying = || {
+        let a = rng.range(-4.0, 4.0f64).to_radians();
+        let (tx, ty) = (rng.range(-15.0, 15.0), rng.range(-15.0, 15.0));
+        let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
+        let (c, s) = (a.cos(), a.sin());
+        Homography([
+            [c, -s, cx - c * cx + s * cy + tx],
+            [s, c, cy - s * cx - c * cy + ty],
+            [0.0, 0.0, 1.0],
+        ])
+    };
+    let left = rectifying();
+    (left, rectifying())
 }
