@@ -90,6 +90,63 @@ enum BlockKind {
     Bare,
 }
 
+impl BlockKind {
+    /// The kind of a new block: mostly houses and commercial buildings, some parks and fields.
+    fn draw(rng: &mut Stream) -> Self {
+        match rng.next_unit() {
+            r if r < 0.45 => BlockKind::Residential,
+            r if r < 0.72 => BlockKind::Commercial,
+            r if r < 0.86 => BlockKind::Park,
+            r if r < 0.95 => BlockKind::Field,
+            _ => BlockKind::Bare,
+        }
+    }
+
+    /// `ground` covered as this kind of block covers its open land (grass, parking lots with
+    /// painted stalls, crop rows, bare soil), at position `(lp, lq)` within the grid cell.
+    fn cover(self, ground: Surface, (lp, lq): (f64, f64), tex: &Texture) -> Surface {
+        let fine = tex.fine;
+        match self {
+            BlockKind::Residential | BlockKind::Park => Surface {
+                class: class::RANGELAND,
+                albedo: vary(
+                    [0.20, 0.33, 0.13],
+                    (0.6 * tex.broad(8.0) + 0.4 * fine).min(1.0),
+                    0.7,
+                ),
+                texture: tex.broad(8.0),
+                ..ground
+            },
+            BlockKind::Commercial => {
+                let stall = lp.rem_euclid(6.0) < 0.4 && lq.rem_euclid(20.0) > 8.0;
+                Surface {
+                    class: class::DEVELOPED,
+                    albedo: if stall {
+                        [0.80, 0.80, 0.78]
+                    } else {
+                        vary([0.36, 0.36, 0.37], fine, 0.35)
+                    },
+                    ..ground
+                }
+            }
+            BlockKind::Field => {
+                let rows = (lp * 0.9).sin() * 0.5 + 0.5;
+                Surface {
+                    class: class::AGRICULTURE,
+                    albedo: vary(
+                        [0.40, 0.42, 0.20],
+                        (0.5 * rows as f32 + 0.5 * fine).min(1.0),
+                        0.6,
+                    ),
+                    texture: rows as f32,
+                    ..ground
+                }
+            }
+            BlockKind::Bare => ground,
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 struct Block {
     kind: BlockKind,
@@ -238,6 +295,8 @@ impl Scene {
         WATER_LEVEL_M + BANK_RISE_M + hills * valley
     }
 
+    /// Lays out block (bi, bj) of the street grid from its own random stream, so a block does
+    /// not depend on which others the scene covers.
     fn layout_block(&self, bi: i64, bj: i64) -> Block {
         let key = hash2(self.params.seed ^ 0xB10C, bi, bj);
         let mut rng = Stream::new(key);
@@ -248,14 +307,7 @@ impl Scene {
             (bi + 1) as f64 * pitch - inset,
             (bj + 1) as f64 * pitch - inset,
         );
-        let r = rng.next_unit();
-        let kind = match r {
-            r if r < 0.45 => BlockKind::Residential,
-            r if r < 0.72 => BlockKind::Commercial,
-            r if r < 0.86 => BlockKind::Park,
-            r if r < 0.95 => BlockKind::Field,
-            _ => BlockKind::Bare,
-        };
+        let kind = BlockKind::draw(&mut rng);
         let mut block = Block {
             kind,
             buildings: Vec::new(),
@@ -263,108 +315,110 @@ impl Scene {
             pond: None,
         };
         let id_base = key & 0xFFFF_FFFF_0000;
+        let bounds = (p0, q0, p1, q1);
         match kind {
-            BlockKind::Residential => {
-                let (nx, ny) = (2, 2);
-                let (lw, lh) = ((p1 - p0) / nx as f64, (q1 - q0) / ny as f64);
-                for a in 0..nx {
-                    for b in 0..ny {
-                        let (lp0, lq0) = (p0 + a as f64 * lw, q0 + b as f64 * lh);
-                        let (w, h) = (lw * rng.range(0.45, 0.72), lh * rng.range(0.45, 0.72));
-                        let cp = lp0 + lw / 2.0 + rng.range(-0.1, 0.1) * lw;
-                        let cq = lq0 + lh / 2.0 + rng.range(-0.1, 0.1) * lh;
-                        block.buildings.push(self.building(
-                            &mut rng,
-                            (cp - w / 2.0, cq - h / 2.0, cp + w / 2.0, cq + h / 2.0),
-                            (4.0, 8.0),
-                            true,
-                            id_base + block.buildings.len() as u64 + 1,
-                        ));
-                        let n_trees = (rng.next_unit() * 3.0) as usize;
-                        for _ in 0..n_trees {
-                            let (tp, tq) = (rng.range(lp0, lp0 + lw), rng.range(lq0, lq0 + lh));
-                            self.push_tree(&mut block, &mut rng, tp, tq, (3.0, 6.0));
-                        }
-                    }
-                }
-            }
+            BlockKind::Residential => self.lay_out_houses(&mut block, &mut rng, bounds, id_base),
             BlockKind::Commercial => {
-                let m = rng.range(3.0, 10.0);
-                let (bp0, bq0, bp1, bq1) = (p0 + m, q0 + m, p1 - m * rng.range(0.5, 2.0), q1 - m);
-                if rng.chance(0.5) {
-                    // Two wings of different heights: an L or a step.
-                    let split = rng.range(0.35, 0.65);
-                    let pm = bp0 + (bp1 - bp0) * split;
-                    let qm = bq0 + (bq1 - bq0) * rng.range(0.3, 0.7);
-                    let id = id_base + 1;
-                    block.buildings.push(self.building(
-                        &mut rng,
-                        (bp0, bq0, pm, bq1),
-                        (10.0, 42.0),
-                        false,
-                        id,
-                    ));
-                    block.buildings.push(self.building(
-                        &mut rng,
-                        (pm, bq0, bp1, qm),
-                        (8.0, 30.0),
-                        false,
-                        id + 1,
-                    ));
-                } else {
-                    block.buildings.push(self.building(
-                        &mut rng,
-                        (bp0, bq0, bp1, bq1),
-                        (10.0, 45.0),
-                        false,
-                        id_base + 1,
-                    ));
-                }
-                // Rooftop plant rooms.
-                let roofs: Vec<Building> = block.buildings.clone();
-                for roof in roofs {
-                    for _ in 0..(rng.next_unit() * 3.0) as usize {
-                        let (w, h) = (rng.range(4.0, 9.0), rng.range(4.0, 9.0));
-                        let cp = rng.range(roof.p0 + w, (roof.p1 - w).max(roof.p0 + w + 0.1));
-                        let cq = rng.range(roof.q0 + h, (roof.q1 - h).max(roof.q0 + h + 0.1));
-                        let mut b = roof.clone();
-                        (b.p0, b.q0, b.p1, b.q1) =
-                            (cp - w / 2.0, cq - h / 2.0, cp + w / 2.0, cq + h / 2.0);
-                        b.eave_m = roof.eave_m + rng.range(2.0, 4.0);
-                        b.roof = ROOF_COLOURS[(rng.next_unit() * 6.0) as usize];
-                        b.id = roof.id + 100 + block.buildings.len() as u64;
-                        block.buildings.push(b);
-                    }
-                }
+                self.lay_out_commercial(&mut block, &mut rng, bounds, id_base);
+                add_plant_rooms(&mut block, &mut rng);
             }
-            BlockKind::Park => {
-                if rng.chance(0.4) {
-                    let r = rng.range(8.0, 0.3 * (p1 - p0));
-                    block.pond = Some((rng.range(p0 + r, p1 - r), rng.range(q0 + r, q1 - r), r));
-                }
-                for _ in 0..(rng.range(6.0, 18.0) as usize) {
-                    let (tp, tq) = (rng.range(p0, p1), rng.range(q0, q1));
-                    self.push_tree(&mut block, &mut rng, tp, tq, (4.0, 9.0));
-                }
-            }
+            BlockKind::Park => self.lay_out_park(&mut block, &mut rng, bounds),
             BlockKind::Field | BlockKind::Bare => {}
         }
-        // Nothing is built in the river.
+        self.clear_river(&mut block);
+        block
+    }
+
+    /// A 2×2 grid of lots, each with a pitched-roof house near its centre and a few trees.
+    fn lay_out_houses(
+        &self,
+        block: &mut Block,
+        rng: &mut Stream,
+        (p0, q0, p1, q1): (f64, f64, f64, f64),
+        id_base: u64,
+    ) {
+        let (nx, ny) = (2, 2);
+        let (lw, lh) = ((p1 - p0) / nx as f64, (q1 - q0) / ny as f64);
+        for a in 0..nx {
+            for b in 0..ny {
+                let (lp0, lq0) = (p0 + a as f64 * lw, q0 + b as f64 * lh);
+                let (w, h) = (lw * rng.range(0.45, 0.72), lh * rng.range(0.45, 0.72));
+                let cp = lp0 + lw / 2.0 + rng.range(-0.1, 0.1) * lw;
+                let cq = lq0 + lh / 2.0 + rng.range(-0.1, 0.1) * lh;
+                block.buildings.push(self.building(
+                    rng,
+                    (cp - w / 2.0, cq - h / 2.0, cp + w / 2.0, cq + h / 2.0),
+                    (4.0, 8.0),
+                    true,
+                    id_base + block.buildings.len() as u64 + 1,
+                ));
+                let n_trees = (rng.next_unit() * 3.0) as usize;
+                for _ in 0..n_trees {
+                    let (tp, tq) = (rng.range(lp0, lp0 + lw), rng.range(lq0, lq0 + lh));
+                    self.push_tree(block, rng, tp, tq, (3.0, 6.0));
+                }
+            }
+        }
+    }
+
+    /// One flat-roofed building filling the block, or two wings of different heights (an L or a
+    /// step).
+    fn lay_out_commercial(
+        &self,
+        block: &mut Block,
+        rng: &mut Stream,
+        (p0, q0, p1, q1): (f64, f64, f64, f64),
+        id_base: u64,
+    ) {
+        let m = rng.range(3.0, 10.0);
+        let (bp0, bq0, bp1, bq1) = (p0 + m, q0 + m, p1 - m * rng.range(0.5, 2.0), q1 - m);
+        if rng.chance(0.5) {
+            let split = rng.range(0.35, 0.65);
+            let pm = bp0 + (bp1 - bp0) * split;
+            let qm = bq0 + (bq1 - bq0) * rng.range(0.3, 0.7);
+            let id = id_base + 1;
+            let wing = self.building(rng, (bp0, bq0, pm, bq1), (10.0, 42.0), false, id);
+            block.buildings.push(wing);
+            let wing = self.building(rng, (pm, bq0, bp1, qm), (8.0, 30.0), false, id + 1);
+            block.buildings.push(wing);
+        } else {
+            let whole = self.building(rng, (bp0, bq0, bp1, bq1), (10.0, 45.0), false, id_base + 1);
+            block.buildings.push(whole);
+        }
+    }
+
+    /// Sometimes a pond, and trees scattered over the block.
+    fn lay_out_park(
+        &self,
+        block: &mut Block,
+        rng: &mut Stream,
+        (p0, q0, p1, q1): (f64, f64, f64, f64),
+    ) {
+        if rng.chance(0.4) {
+            let r = rng.range(8.0, 0.3 * (p1 - p0));
+            block.pond = Some((rng.range(p0 + r, p1 - r), rng.range(q0 + r, q1 - r), r));
+        }
+        for _ in 0..(rng.range(6.0, 18.0) as usize) {
+            let (tp, tq) = (rng.range(p0, p1), rng.range(q0, q1));
+            self.push_tree(block, rng, tp, tq, (4.0, 9.0));
+        }
+    }
+
+    /// Removes the buildings and trees that would stand in (or too close to) the river.
+    fn clear_river(&self, block: &mut Block) {
+        let Some(river) = &self.river else {
+            return;
+        };
         let margin = 6.0;
         block.buildings.retain(|b| {
             let (x, y) = self.to_ground((b.p0 + b.p1) / 2.0, (b.q0 + b.q1) / 2.0);
             let reach = (b.p1 - b.p0).hypot(b.q1 - b.q0) / 2.0;
-            self.river
-                .as_ref()
-                .is_none_or(|r| self.river_distance(x, y) > r.half_width + reach + margin)
+            self.river_distance(x, y) > river.half_width + reach + margin
         });
         block.trees.retain(|t| {
             let (x, y) = self.to_ground(t.p, t.q);
-            self.river
-                .as_ref()
-                .is_none_or(|r| self.river_distance(x, y) > r.half_width + t.radius + 2.0)
+            self.river_distance(x, y) > river.half_width + t.radius + 2.0
         });
-        block
     }
 
     fn building(
@@ -433,150 +487,144 @@ impl Scene {
 
     /// What is at ground point (x, y) (pixels): the highest of terrain, water, buildings and trees.
     pub fn surface(&self, x: f64, y: f64) -> Surface {
-        let seed = self.params.seed;
-        let fine = fbm(seed ^ 0xF1E, x / 3.0, y / 3.0, 3) as f32;
-        let tex = |scale: f64| fbm(seed ^ 0x7E7, x / scale, y / scale, 3) as f32;
-        let vary = |c: [f32; 3], t: f32, amount: f32| {
-            c.map(|v| (v * (1.0 - amount / 2.0 + amount * t)).clamp(0.0, 1.0))
-        };
-
+        let tex = Texture::at(self.params.seed, x, y);
         // Water first: rivers and ponds are flat.
         if let Some(r) = &self.river {
             if self.river_distance(x, y) < r.half_width {
-                return water(fine);
+                return water(tex.fine);
             }
         }
         let (p, q) = self.to_grid(x, y);
         let block = self.block(p, q);
         if let Some((cp, cq, r)) = block.and_then(|b| b.pond) {
             if (p - cp).hypot(q - cq) < r {
-                return water(fine);
+                return water(tex.fine);
             }
         }
+        let pitch = self.params.block_pitch;
+        let local = (p.rem_euclid(pitch), q.rem_euclid(pitch));
+        let ground = self.bare_ground(x, y, &tex);
+        if let Some(street) = self.street(ground, local, &tex) {
+            return street;
+        }
+        let Some(block) = block else {
+            return ground;
+        };
+        let covered = block.kind.cover(ground, local, &tex);
+        let built = block
+            .buildings
+            .iter()
+            .fold(covered, |best, b| self.roof_over(best, b, (p, q), tex.fine));
+        block
+            .trees
+            .iter()
+            .fold(built, |best, t| self.crown_over(best, t, (x, y), (p, q)))
+    }
 
+    /// Bare soil on the terrain, its normal from forward differences (the terrain is smooth at
+    /// the scale of a pixel).
+    fn bare_ground(&self, x: f64, y: f64, tex: &Texture) -> Surface {
         let ground_m = self.terrain_m(x, y);
-        // Forward differences: the terrain is smooth at the scale of a pixel.
         let h = 0.5;
         let gx = (self.terrain_m(x + h, y) - ground_m) / (h * self.params.gsd);
         let gy = (self.terrain_m(x, y + h) - ground_m) / (h * self.params.gsd);
-        let gn = {
-            let n = (gx * gx + gy * gy + 1.0).sqrt();
-            [(-gx / n) as f32, (-gy / n) as f32, (1.0 / n) as f32]
-        };
-        let soil = tex(20.0);
-        let mut best = Surface {
+        let n = (gx * gx + gy * gy + 1.0).sqrt();
+        let soil = tex.broad(20.0);
+        Surface {
             height: ground_m as f32,
             class: class::BARELAND,
             albedo: vary([0.52, 0.44, 0.34], soil, 0.5),
             facade: [0.45, 0.40, 0.33],
-            normal: gn,
+            normal: [(-gx / n) as f32, (-gy / n) as f32, (1.0 / n) as f32],
             texture: soil,
-        };
+        }
+    }
 
-        // Streets: roads on the grid lines, pavements beside them.
+    /// `ground` paved as a road (on the grid lines, with a dashed centre line) or a pavement
+    /// beside one, at grid position `(lp, lq)` within its cell; `None` inside a block.
+    fn street(&self, ground: Surface, (lp, lq): (f64, f64), tex: &Texture) -> Option<Surface> {
         let pitch = self.params.block_pitch;
-        let (lp, lq) = (p.rem_euclid(pitch), q.rem_euclid(pitch));
         let half_road = self.params.road_width / 2.0;
         let dist_p = lp.min(pitch - lp);
         let dist_q = lq.min(pitch - lq);
         let street = dist_p.min(dist_q);
         if street < half_road {
-            // Dashed centre line along the road's axis.
             let along = if dist_p < dist_q { lq } else { lp };
             let marking = street < 0.5 && along.rem_euclid(12.0) < 6.0;
-            best.class = class::ROAD;
-            best.albedo = if marking {
-                [0.85, 0.85, 0.80]
-            } else {
-                vary([0.30, 0.30, 0.31], fine, 0.35)
-            };
-            best.texture = fine;
-            return best;
+            return Some(Surface {
+                class: class::ROAD,
+                albedo: if marking {
+                    [0.85, 0.85, 0.80]
+                } else {
+                    vary([0.30, 0.30, 0.31], tex.fine, 0.35)
+                },
+                texture: tex.fine,
+                ..ground
+            });
         }
-        if street < half_road + 2.0 {
-            best.class = class::DEVELOPED;
-            best.albedo = vary([0.58, 0.56, 0.52], fine, 0.3);
-            return best;
-        }
+        (street < half_road + 2.0).then(|| Surface {
+            class: class::DEVELOPED,
+            albedo: vary([0.58, 0.56, 0.52], tex.fine, 0.3),
+            ..ground
+        })
+    }
 
-        if let Some(block) = block {
-            match block.kind {
-                BlockKind::Residential | BlockKind::Park => {
-                    best.class = class::RANGELAND;
-                    best.albedo = vary(
-                        [0.20, 0.33, 0.13],
-                        (0.6 * tex(8.0) + 0.4 * fine).min(1.0),
-                        0.7,
-                    );
-                    best.texture = tex(8.0);
-                }
-                BlockKind::Commercial => {
-                    // Parking lots with painted stalls.
-                    let stall = lp.rem_euclid(6.0) < 0.4 && lq.rem_euclid(20.0) > 8.0;
-                    best.class = class::DEVELOPED;
-                    best.albedo = if stall {
-                        [0.80, 0.80, 0.78]
-                    } else {
-                        vary([0.36, 0.36, 0.37], fine, 0.35)
-                    };
-                }
-                BlockKind::Field => {
-                    let rows = (lp * 0.9).sin() * 0.5 + 0.5;
-                    best.class = class::AGRICULTURE;
-                    best.albedo = vary(
-                        [0.40, 0.42, 0.20],
-                        (0.5 * rows as f32 + 0.5 * fine).min(1.0),
-                        0.6,
-                    );
-                    best.texture = rows as f32;
-                }
-                BlockKind::Bare => {}
-            }
-            for b in &block.buildings {
-                if p >= b.p0 && p < b.p1 && q >= b.q0 && q < b.q1 {
-                    let (roof_m, dp, dq) = b.roof_height(p, q);
-                    let z = (b.base_m + roof_m) as f32;
-                    if z > best.height {
-                        let shingles =
-                            (unit(hash2(b.id, (p * 2.0) as i64, (q * 2.0) as i64)) as f32) * 0.5
-                                + 0.5 * fine;
-                        best = Surface {
-                            height: z,
-                            class: class::BUILDING,
-                            albedo: vary(b.roof, shingles, 0.25),
-                            facade: b.facade,
-                            normal: self.normal_from_grid_gradient(dp, dq),
-                            texture: shingles,
-                        };
-                    }
-                }
-            }
-            for t in &block.trees {
-                let r2 = ((p - t.p).powi(2) + (q - t.q).powi(2)) / (t.radius * t.radius);
-                if r2 < 1.0 {
-                    // A lumpy dome: leaves give the crown its texture.
-                    let leaves = value_noise(t.id, x / 1.5, y / 1.5) as f32;
-                    let z = (t.base_m + t.crown_m * (1.0 - r2).sqrt() + 0.6 * leaves as f64) as f32;
-                    if z > best.height {
-                        let slope = t.crown_m / (self.params.gsd * t.radius);
-                        let (ux, uy) = self.to_ground_dir(p - t.p, q - t.q);
-                        let s = (r2.sqrt() / (1.0 - r2).sqrt().max(0.2)).min(3.0) * slope
-                            / t.radius.max(1.0);
-                        let (gx, gy) = (-ux * s, -uy * s);
-                        let n = (gx * gx + gy * gy + 1.0).sqrt();
-                        best = Surface {
-                            height: z,
-                            class: class::TREE,
-                            albedo: vary([0.10, 0.24, 0.08], leaves, 0.9),
-                            facade: [0.08, 0.18, 0.06],
-                            normal: [(-gx / n) as f32, (-gy / n) as f32, (1.0 / n) as f32],
-                            texture: leaves,
-                        };
-                    }
-                }
-            }
+    /// `best`, or building `b`'s roof (shingled) where that is higher at grid (p, q).
+    fn roof_over(&self, best: Surface, b: &Building, (p, q): (f64, f64), fine: f32) -> Surface {
+        if !(p >= b.p0 && p < b.p1 && q >= b.q0 && q < b.q1) {
+            return best;
         }
-        best
+        let (roof_m, dp, dq) = b.roof_height(p, q);
+        let z = (b.base_m + roof_m) as f32;
+        if z > best.height {
+            let shingles =
+                (unit(hash2(b.id, (p * 2.0) as i64, (q * 2.0) as i64)) as f32) * 0.5 + 0.5 * fine;
+            Surface {
+                height: z,
+                class: class::BUILDING,
+                albedo: vary(b.roof, shingles, 0.25),
+                facade: b.facade,
+                normal: self.normal_from_grid_gradient(dp, dq),
+                texture: shingles,
+            }
+        } else {
+            best
+        }
+    }
+
+    /// `best`, or tree `t`'s crown (a lumpy dome whose leaves give it its texture) where that is
+    /// higher at ground (x, y), grid (p, q).
+    fn crown_over(
+        &self,
+        best: Surface,
+        t: &Tree,
+        (x, y): (f64, f64),
+        (p, q): (f64, f64),
+    ) -> Surface {
+        let r2 = ((p - t.p).powi(2) + (q - t.q).powi(2)) / (t.radius * t.radius);
+        let inside = r2 < 1.0;
+        if !inside {
+            return best;
+        }
+        let leaves = value_noise(t.id, x / 1.5, y / 1.5) as f32;
+        let z = (t.base_m + t.crown_m * (1.0 - r2).sqrt() + 0.6 * leaves as f64) as f32;
+        let higher = z > best.height;
+        if !higher {
+            return best;
+        }
+        let slope = t.crown_m / (self.params.gsd * t.radius);
+        let (ux, uy) = self.to_ground_dir(p - t.p, q - t.q);
+        let s = (r2.sqrt() / (1.0 - r2).sqrt().max(0.2)).min(3.0) * slope / t.radius.max(1.0);
+        let (gx, gy) = (-ux * s, -uy * s);
+        let n = (gx * gx + gy * gy + 1.0).sqrt();
+        Surface {
+            height: z,
+            class: class::TREE,
+            albedo: vary([0.10, 0.24, 0.08], leaves, 0.9),
+            facade: [0.08, 0.18, 0.06],
+            normal: [(-gx / n) as f32, (-gy / n) as f32, (1.0 / n) as f32],
+            texture: leaves,
+        }
     }
 
     fn to_ground_dir(&self, dp: f64, dq: f64) -> (f64, f64) {
@@ -606,6 +654,50 @@ impl Building {
             (h, 0.0, slope)
         }
     }
+}
+
+/// Rooftop plant rooms on the block's buildings: a few boxes a little above each roof.
+fn add_plant_rooms(block: &mut Block, rng: &mut Stream) {
+    let roofs: Vec<Building> = block.buildings.clone();
+    for roof in roofs {
+        for _ in 0..(rng.next_unit() * 3.0) as usize {
+            let (w, h) = (rng.range(4.0, 9.0), rng.range(4.0, 9.0));
+            let cp = rng.range(roof.p0 + w, (roof.p1 - w).max(roof.p0 + w + 0.1));
+            let cq = rng.range(roof.q0 + h, (roof.q1 - h).max(roof.q0 + h + 0.1));
+            let mut b = roof.clone();
+            (b.p0, b.q0, b.p1, b.q1) = (cp - w / 2.0, cq - h / 2.0, cp + w / 2.0, cq + h / 2.0);
+            b.eave_m = roof.eave_m + rng.range(2.0, 4.0);
+            b.roof = ROOF_COLOURS[(rng.next_unit() * 6.0) as usize];
+            b.id = roof.id + 100 + block.buildings.len() as u64;
+            block.buildings.push(b);
+        }
+    }
+}
+
+/// The texture fields at one ground point, from which surfaces vary their reflectance.
+struct Texture {
+    seed: u64,
+    x: f64,
+    y: f64,
+    /// Pixel-scale texture in [0, 1].
+    fine: f32,
+}
+
+impl Texture {
+    fn at(seed: u64, x: f64, y: f64) -> Self {
+        let fine = fbm(seed ^ 0xF1E, x / 3.0, y / 3.0, 3) as f32;
+        Texture { seed, x, y, fine }
+    }
+
+    /// Texture whose features are about `scale` pixels wide, in [0, 1].
+    fn broad(&self, scale: f64) -> f32 {
+        fbm(self.seed ^ 0x7E7, self.x / scale, self.y / scale, 3) as f32
+    }
+}
+
+/// Reflectance `c` scaled between `1 − amount/2` and `1 + amount/2` by texture `t`.
+fn vary(c: [f32; 3], t: f32, amount: f32) -> [f32; 3] {
+    c.map(|v| (v * (1.0 - amount / 2.0 + amount * t)).clamp(0.0, 1.0))
 }
 
 fn water(fine: f32) -> Surface {
