@@ -81,6 +81,19 @@ impl Cover {
         }
     }
 
+    /// The cover-weighted sum of a value given per land cover (`per_cover.tree` for trees, …).
+    pub(crate) fn weighted(&self, per_cover: &Cover) -> f32 {
+        per_cover.tree * self.tree
+            + per_cover.grass * self.grass
+            + per_cover.crop * self.crop
+            + per_cover.bare * self.bare
+            + per_cover.developed * self.developed
+            + per_cover.road * self.road
+            + per_cover.roof * self.roof
+            + per_cover.other * self.other
+            + per_cover.water * self.water
+    }
+
     /// Typical sunlit luminance of this cover: the reference that tells a shadowed pixel (much
     /// darker) from a sunlit one when snow is laid on it.
     pub(crate) fn sunlit_luminance(&self) -> f32 {

@@ -5,7 +5,7 @@
 //! blossoms in spring). Each value is jittered per (seed, image, season), so two images of the
 //! same season never look identical.
 
-use super::cover::luminance;
+use super::cover::{luminance, Cover};
 use super::random::Rng;
 use crate::Season;
 
@@ -54,14 +54,8 @@ impl Tint {
 /// Base snow cover per land cover (before the patchiness field).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Snow {
-    pub tree: f32,
-    pub grass: f32,
-    pub crop: f32,
-    pub bare: f32,
-    pub developed: f32,
-    pub road: f32,
-    pub roof: f32,
-    pub other: f32,
+    /// Snow share of each land cover (water takes none: it freezes to ice instead).
+    pub cover: Cover,
     /// Amplitude of the smooth field added to the base cover (patchy snow).
     pub patchiness: f32,
 }
@@ -115,149 +109,193 @@ fn jitter_colour(rng: &mut Rng, c: [f32; 3], rel: f32) -> [f32; 3] {
     c.map(|v| jitter(rng, v, rel))
 }
 
+/// A nominal recolouring `(colour, gain, strength)`, jittered per image by [`draw_tint`].
+type NominalTint = ([f32; 3], f32, f32);
+
+/// A nominal value and its relative jitter, drawn by [`jitter`].
+type Jittered = (f32, f32);
+
+/// A range a value is drawn uniformly from.
+type Range = (f32, f32);
+
+/// The nominal look of a season, from the prompts of the method: what [`Style::new`] jitters.
+struct SeasonLook {
+    trees: &'static [NominalTint],
+    grass: NominalTint,
+    crop: NominalTint,
+    crop_alt: NominalTint,
+    crop_alt_share: Range,
+    bare: NominalTint,
+    /// Roads are recoloured only where the season changes them (winter's cleared asphalt).
+    road: Option<NominalTint>,
+    water: NominalTint,
+    shadow_factor: Jittered,
+    gain: Jittered,
+    illumination_amplitude: Range,
+    temperature: Jittered,
+    contrast: Jittered,
+    saturation: Jittered,
+    haze: Range,
+    haze_amplitude: Range,
+    haze_colour: [f32; 3],
+}
+
+#[rustfmt::skip]
+const SUMMER: SeasonLook = SeasonLook {
+    trees: &[([0.10, 0.27, 0.06], 1.0, 0.85)],
+    grass: ([0.20, 0.42, 0.10], 1.1, 0.85), crop: ([0.26, 0.46, 0.10], 1.05, 0.85),
+    crop_alt: ([0.58, 0.50, 0.24], 1.25, 0.8), crop_alt_share: (0.2, 0.5),
+    bare: ([0.55, 0.45, 0.32], 1.05, 0.35), road: None, water: ([0.06, 0.14, 0.16], 1.0, 0.5),
+    shadow_factor: (1.2, 0.08), gain: (1.08, 0.04), illumination_amplitude: (0.03, 0.08),
+    temperature: (0.5, 0.3), contrast: (1.08, 0.03), saturation: (1.15, 0.05),
+    haze: (0.03, 0.09), haze_amplitude: (0.01, 0.04), haze_colour: [0.72, 0.78, 0.86],
+};
+
+#[rustfmt::skip]
+const AUTUMN: SeasonLook = SeasonLook {
+    trees: &[
+        ([0.20, 0.30, 0.08], 1.05, 0.9), ([0.55, 0.48, 0.12], 1.25, 0.9),
+        ([0.60, 0.32, 0.08], 1.2, 0.9), ([0.52, 0.18, 0.08], 1.1, 0.9),
+        ([0.40, 0.28, 0.16], 1.0, 0.9),
+    ],
+    grass: ([0.40, 0.40, 0.18], 1.1, 0.8), crop: ([0.50, 0.40, 0.26], 1.15, 0.85),
+    crop_alt: ([0.62, 0.52, 0.28], 1.3, 0.85), crop_alt_share: (0.3, 0.6),
+    bare: ([0.50, 0.40, 0.30], 0.95, 0.4), road: None, water: ([0.07, 0.11, 0.12], 0.95, 0.5),
+    shadow_factor: (0.82, 0.06), gain: (0.96, 0.04), illumination_amplitude: (0.04, 0.09),
+    temperature: (0.9, 0.25), contrast: (0.95, 0.03), saturation: (0.95, 0.05),
+    haze: (0.04, 0.11), haze_amplitude: (0.01, 0.05), haze_colour: [0.80, 0.76, 0.70],
+};
+
+#[rustfmt::skip]
+const WINTER: SeasonLook = SeasonLook {
+    trees: &[([0.34, 0.30, 0.27], 0.9, 0.9)],
+    grass: ([0.42, 0.38, 0.30], 1.0, 0.8), crop: ([0.45, 0.40, 0.32], 1.0, 0.8),
+    crop_alt: ([0.40, 0.33, 0.26], 0.9, 0.8), crop_alt_share: (0.2, 0.5),
+    bare: ([0.45, 0.42, 0.38], 0.95, 0.4), road: Some(([0.25, 0.26, 0.28], 0.85, 0.6)),
+    water: ([0.05, 0.08, 0.10], 0.85, 0.6),
+    shadow_factor: (0.72, 0.08), gain: (0.92, 0.04), illumination_amplitude: (0.04, 0.1),
+    temperature: (-0.9, 0.25), contrast: (0.9, 0.04), saturation: (0.72, 0.08),
+    haze: (0.02, 0.07), haze_amplitude: (0.01, 0.03), haze_colour: [0.78, 0.82, 0.90],
+};
+
+#[rustfmt::skip]
+const SPRING: SeasonLook = SeasonLook {
+    trees: &[([0.30, 0.50, 0.14], 1.3, 0.85), ([0.22, 0.42, 0.12], 1.15, 0.85)],
+    grass: ([0.30, 0.52, 0.14], 1.2, 0.85), crop: ([0.34, 0.52, 0.16], 1.15, 0.85),
+    crop_alt: ([0.46, 0.36, 0.26], 0.95, 0.85), crop_alt_share: (0.2, 0.5),
+    bare: ([0.50, 0.42, 0.32], 0.95, 0.3), road: None, water: ([0.07, 0.14, 0.15], 1.05, 0.5),
+    shadow_factor: (0.95, 0.06), gain: (1.02, 0.04), illumination_amplitude: (0.03, 0.08),
+    temperature: (-0.15, 0.5), contrast: (1.03, 0.03), saturation: (1.1, 0.05),
+    haze: (0.03, 0.10), haze_amplitude: (0.01, 0.04), haze_colour: [0.76, 0.80, 0.86],
+};
+
+impl SeasonLook {
+    fn of(season: Season) -> &'static SeasonLook {
+        match season {
+            Season::Summer => &SUMMER,
+            Season::Autumn => &AUTUMN,
+            Season::Winter => &WINTER,
+            Season::Spring => &SPRING,
+        }
+    }
+}
+
+/// A tint of `nominal` whose colour, gain and strength are jittered by 8 %, 6 % and 8 %.
+fn draw_tint(rng: &mut Rng, (colour, gain, strength): NominalTint) -> Tint {
+    Tint::new(
+        jitter_colour(rng, colour, 0.08),
+        jitter(rng, gain, 0.06),
+        jitter(rng, strength, 0.08),
+    )
+}
+
+fn draw_range(rng: &mut Rng, (lo, hi): Range) -> f32 {
+    rng.range(lo, hi)
+}
+
+fn draw_jittered(rng: &mut Rng, (value, rel): Jittered) -> f32 {
+    jitter(rng, value, rel)
+}
+
 impl Style {
+    /// The look of `season` for one image, drawn from `rng`. The draws keep a fixed order
+    /// (land cover, the season's own effects, light, sensor), so a seed always gives one look.
     pub(crate) fn new(season: Season, rng: &mut Rng) -> Self {
-        let tint = |rng: &mut Rng, colour: [f32; 3], gain: f32, strength: f32| {
-            Tint::new(
-                jitter_colour(rng, colour, 0.08),
-                jitter(rng, gain, 0.06),
-                jitter(rng, strength, 0.08),
-            )
-        };
-        let neutral = Tint::identity();
-        let mut style = match season {
-            Season::Summer => Style {
-                tree_palette: vec![tint(rng, [0.10, 0.27, 0.06], 1.0, 0.85)],
-                grass: tint(rng, [0.20, 0.42, 0.10], 1.1, 0.85),
-                crop: tint(rng, [0.26, 0.46, 0.10], 1.05, 0.85),
-                crop_alt: tint(rng, [0.58, 0.50, 0.24], 1.25, 0.8),
-                crop_alt_share: rng.range(0.2, 0.5),
-                bare: tint(rng, [0.55, 0.45, 0.32], 1.05, 0.35),
-                developed: neutral,
-                road: neutral,
-                roof: neutral,
-                water: tint(rng, [0.06, 0.14, 0.16], 1.0, 0.5),
-                blossom: None,
-                ice: 0.0,
-                snow: None,
-                shadow_factor: jitter(rng, 1.2, 0.08),
-                gain: jitter(rng, 1.08, 0.04),
-                illumination_amplitude: rng.range(0.03, 0.08),
-                temperature: jitter(rng, 0.5, 0.3),
-                contrast: jitter(rng, 1.08, 0.03),
-                saturation: jitter(rng, 1.15, 0.05),
-                haze: rng.range(0.03, 0.09),
-                haze_amplitude: rng.range(0.01, 0.04),
-                haze_colour: [0.72, 0.78, 0.86],
-                ..Style::sensor_defaults()
-            },
-            Season::Autumn => Style {
-                tree_palette: vec![
-                    tint(rng, [0.20, 0.30, 0.08], 1.05, 0.9),
-                    tint(rng, [0.55, 0.48, 0.12], 1.25, 0.9),
-                    tint(rng, [0.60, 0.32, 0.08], 1.2, 0.9),
-                    tint(rng, [0.52, 0.18, 0.08], 1.1, 0.9),
-                    tint(rng, [0.40, 0.28, 0.16], 1.0, 0.9),
-                ],
-                grass: tint(rng, [0.40, 0.40, 0.18], 1.1, 0.8),
-                crop: tint(rng, [0.50, 0.40, 0.26], 1.15, 0.85),
-                crop_alt: tint(rng, [0.62, 0.52, 0.28], 1.3, 0.85),
-                crop_alt_share: rng.range(0.3, 0.6),
-                bare: tint(rng, [0.50, 0.40, 0.30], 0.95, 0.4),
-                developed: neutral,
-                road: neutral,
-                roof: neutral,
-                water: tint(rng, [0.07, 0.11, 0.12], 0.95, 0.5),
-                blossom: None,
-                ice: 0.0,
-                snow: None,
-                shadow_factor: jitter(rng, 0.82, 0.06),
-                gain: jitter(rng, 0.96, 0.04),
-                illumination_amplitude: rng.range(0.04, 0.09),
-                temperature: jitter(rng, 0.9, 0.25),
-                contrast: jitter(rng, 0.95, 0.03),
-                saturation: jitter(rng, 0.95, 0.05),
-                haze: rng.range(0.04, 0.11),
-                haze_amplitude: rng.range(0.01, 0.05),
-                haze_colour: [0.80, 0.76, 0.70],
-                ..Style::sensor_defaults()
-            },
-            Season::Winter => Style {
-                tree_palette: vec![tint(rng, [0.34, 0.30, 0.27], 0.9, 0.9)],
-                grass: tint(rng, [0.42, 0.38, 0.30], 1.0, 0.8),
-                crop: tint(rng, [0.45, 0.40, 0.32], 1.0, 0.8),
-                crop_alt: tint(rng, [0.40, 0.33, 0.26], 0.9, 0.8),
-                crop_alt_share: rng.range(0.2, 0.5),
-                bare: tint(rng, [0.45, 0.42, 0.38], 0.95, 0.4),
-                developed: neutral,
-                road: tint(rng, [0.25, 0.26, 0.28], 0.85, 0.6),
-                roof: neutral,
-                water: tint(rng, [0.05, 0.08, 0.10], 0.85, 0.6),
-                blossom: None,
-                ice: rng.range(0.15, 0.6),
-                snow: Some(Snow {
-                    tree: rng.range(0.05, 0.25),
-                    grass: rng.range(0.75, 0.95),
-                    crop: rng.range(0.75, 0.95),
-                    bare: rng.range(0.65, 0.9),
-                    developed: rng.range(0.35, 0.7),
-                    road: rng.range(0.0, 0.08),
-                    roof: rng.range(0.7, 0.95),
-                    other: rng.range(0.3, 0.6),
-                    patchiness: rng.range(0.2, 0.4),
-                }),
-                shadow_factor: jitter(rng, 0.72, 0.08),
-                gain: jitter(rng, 0.92, 0.04),
-                illumination_amplitude: rng.range(0.04, 0.1),
-                temperature: jitter(rng, -0.9, 0.25),
-                contrast: jitter(rng, 0.9, 0.04),
-                saturation: jitter(rng, 0.72, 0.08),
-                haze: rng.range(0.02, 0.07),
-                haze_amplitude: rng.range(0.01, 0.03),
-                haze_colour: [0.78, 0.82, 0.90],
-                ..Style::sensor_defaults()
-            },
-            Season::Spring => Style {
-                tree_palette: vec![
-                    tint(rng, [0.30, 0.50, 0.14], 1.3, 0.85),
-                    tint(rng, [0.22, 0.42, 0.12], 1.15, 0.85),
-                ],
-                grass: tint(rng, [0.30, 0.52, 0.14], 1.2, 0.85),
-                crop: tint(rng, [0.34, 0.52, 0.16], 1.15, 0.85),
-                crop_alt: tint(rng, [0.46, 0.36, 0.26], 0.95, 0.85),
-                crop_alt_share: rng.range(0.2, 0.5),
-                bare: tint(rng, [0.50, 0.42, 0.32], 0.95, 0.3),
-                developed: neutral,
-                road: neutral,
-                roof: neutral,
-                water: tint(rng, [0.07, 0.14, 0.15], 1.05, 0.5),
-                blossom: Some((
-                    tint(rng, [0.86, 0.66, 0.72], 1.8, 0.8),
-                    rng.range(0.15, 0.35),
-                )),
-                ice: 0.0,
-                snow: None,
-                shadow_factor: jitter(rng, 0.95, 0.06),
-                gain: jitter(rng, 1.02, 0.04),
-                illumination_amplitude: rng.range(0.03, 0.08),
-                temperature: jitter(rng, -0.15, 0.5),
-                contrast: jitter(rng, 1.03, 0.03),
-                saturation: jitter(rng, 1.1, 0.05),
-                haze: rng.range(0.03, 0.10),
-                haze_amplitude: rng.range(0.01, 0.04),
-                haze_colour: [0.76, 0.80, 0.86],
-                ..Style::sensor_defaults()
-            },
-        };
-        style.band_gain = std::array::from_fn(|_| rng.range(0.95, 1.05));
-        style.band_offset = std::array::from_fn(|_| rng.range(-0.02, 0.02));
-        style.band_gamma = std::array::from_fn(|_| rng.range(0.92, 1.08));
-        style.noise_dn = rng.range(0.8, 2.0);
+        let look = SeasonLook::of(season);
+        let mut style = Style::neutral();
+        style.draw_land_cover(look, rng);
+        match season {
+            Season::Winter => style.draw_winter(rng),
+            Season::Spring => style.draw_blossom(rng),
+            Season::Summer | Season::Autumn => {}
+        }
+        style.draw_light(look, rng);
+        style.draw_sensor(rng);
         style
     }
 
-    /// Placeholder sensor values, replaced by random ones in [`Style::new`].
-    fn sensor_defaults() -> Style {
+    /// The recolouring of each land cover (developed land and roofs keep their colour).
+    fn draw_land_cover(&mut self, look: &SeasonLook, rng: &mut Rng) {
+        self.tree_palette = look.trees.iter().map(|&t| draw_tint(rng, t)).collect();
+        self.grass = draw_tint(rng, look.grass);
+        self.crop = draw_tint(rng, look.crop);
+        self.crop_alt = draw_tint(rng, look.crop_alt);
+        self.crop_alt_share = draw_range(rng, look.crop_alt_share);
+        self.bare = draw_tint(rng, look.bare);
+        if let Some(road) = look.road {
+            self.road = draw_tint(rng, road);
+        }
+        self.water = draw_tint(rng, look.water);
+    }
+
+    /// Ice on the water and snow on the land, most on open ground and roofs, least on roads.
+    fn draw_winter(&mut self, rng: &mut Rng) {
+        self.ice = rng.range(0.15, 0.6);
+        self.snow = Some(Snow {
+            cover: Cover {
+                tree: rng.range(0.05, 0.25),
+                grass: rng.range(0.75, 0.95),
+                crop: rng.range(0.75, 0.95),
+                bare: rng.range(0.65, 0.9),
+                developed: rng.range(0.35, 0.7),
+                road: rng.range(0.0, 0.08),
+                roof: rng.range(0.7, 0.95),
+                other: rng.range(0.3, 0.6),
+                water: 0.0,
+            },
+            patchiness: rng.range(0.2, 0.4),
+        });
+    }
+
+    /// Spring blossom on part of the canopy.
+    fn draw_blossom(&mut self, rng: &mut Rng) {
+        let tint = draw_tint(rng, ([0.86, 0.66, 0.72], 1.8, 0.8));
+        self.blossom = Some((tint, rng.range(0.15, 0.35)));
+    }
+
+    /// Shadow depth, illumination, colour temperature, contrast, saturation and haze.
+    fn draw_light(&mut self, look: &SeasonLook, rng: &mut Rng) {
+        self.shadow_factor = draw_jittered(rng, look.shadow_factor);
+        self.gain = draw_jittered(rng, look.gain);
+        self.illumination_amplitude = draw_range(rng, look.illumination_amplitude);
+        self.temperature = draw_jittered(rng, look.temperature);
+        self.contrast = draw_jittered(rng, look.contrast);
+        self.saturation = draw_jittered(rng, look.saturation);
+        self.haze = draw_range(rng, look.haze);
+        self.haze_amplitude = draw_range(rng, look.haze_amplitude);
+        self.haze_colour = look.haze_colour;
+    }
+
+    /// The sensor's per-band radiometry and noise.
+    fn draw_sensor(&mut self, rng: &mut Rng) {
+        self.band_gain = std::array::from_fn(|_| rng.range(0.95, 1.05));
+        self.band_offset = std::array::from_fn(|_| rng.range(-0.02, 0.02));
+        self.band_gamma = std::array::from_fn(|_| rng.range(0.92, 1.08));
+        self.noise_dn = rng.range(0.8, 2.0);
+    }
+
+    /// The neutral look (no change anywhere) that [`Style::new`] draws a season's values into.
+    fn neutral() -> Style {
         let neutral = Tint::identity();
         Style {
             tree_palette: Vec::new(),
