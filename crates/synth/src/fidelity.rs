@@ -141,81 +141,121 @@ pub fn check(
         _ => 1.0,
     };
 
-    let (mut tiles_checked, mut tiles_misaligned, mut worst) = (0, 0, 0.0f64);
+    let tiles = tile_shifts(&a, &b, (w, h), params);
+    let (shift_x, shift_y, peak_ncc) = global
+        .as_ref()
+        .map_or((f64::NAN, f64::NAN, 0.0), |g| (g.dx, g.dy, g.peak));
+    let mut report = FidelityReport {
+        shift_x,
+        shift_y,
+        peak_ncc,
+        edge_score,
+        sharpness_ratio,
+        tiles_checked: tiles.checked,
+        tiles_misaligned: tiles.misaligned,
+        worst_tile_shift: tiles.worst,
+        passed: false,
+        failures: Vec::new(),
+    };
+    report.failures = failed_criteria(&report, global.is_some(), params);
+    report.passed = report.failures.is_empty();
+    Ok(report)
+}
+
+/// How the tiles of an image register on their own: a local warp moves some tiles while the
+/// whole image stays in place.
+struct TileShifts {
+    /// Tiles with enough structure to register.
+    checked: usize,
+    /// Of those, the tiles shifted by at least `max_tile_shift_px`.
+    misaligned: usize,
+    /// Largest tile shift, px.
+    worst: f64,
+}
+
+/// Registers each tile of the `(w, h)` structure maps (none when the image is under two tiles
+/// wide or high).
+fn tile_shifts(
+    a: &Structure,
+    b: &Structure,
+    (w, h): (usize, usize),
+    params: &FidelityParams,
+) -> TileShifts {
+    let r = params.search_radius;
+    let mut tiles = TileShifts {
+        checked: 0,
+        misaligned: 0,
+        worst: 0.0,
+    };
     let t = params.tile_size.max(4 * r + 8);
-    if w >= 2 * t && h >= 2 * t {
-        for ty in 0..h / t {
-            for tx in 0..w / t {
-                let rect = Rect {
-                    x0: (tx * t).max(r + 1),
-                    y0: (ty * t).max(r + 1),
-                    x1: ((tx + 1) * t).min(w - r - 1),
-                    y1: ((ty + 1) * t).min(h - r - 1),
-                };
-                if !a.has_structure(rect) {
-                    continue;
-                }
-                let Some(reg) = register(&a, &b, rect, r) else {
-                    continue;
-                };
-                tiles_checked += 1;
-                let s = reg.dx.hypot(reg.dy);
-                worst = worst.max(s);
-                if s >= params.max_tile_shift_px {
-                    tiles_misaligned += 1;
-                }
+    if w < 2 * t || h < 2 * t {
+        return tiles;
+    }
+    for ty in 0..h / t {
+        for tx in 0..w / t {
+            let rect = Rect {
+                x0: (tx * t).max(r + 1),
+                y0: (ty * t).max(r + 1),
+                x1: ((tx + 1) * t).min(w - r - 1),
+                y1: ((ty + 1) * t).min(h - r - 1),
+            };
+            if !a.has_structure(rect) {
+                continue;
+            }
+            let Some(reg) = register(a, b, rect, r) else {
+                continue;
+            };
+            tiles.checked += 1;
+            let s = reg.dx.hypot(reg.dy);
+            tiles.worst = tiles.worst.max(s);
+            if s >= params.max_tile_shift_px {
+                tiles.misaligned += 1;
             }
         }
     }
+    tiles
+}
 
+/// One line per criterion the measurements of `report` fail (`registered`: whether the whole
+/// images overlapped enough to register).
+fn failed_criteria(
+    report: &FidelityReport,
+    registered: bool,
+    params: &FidelityParams,
+) -> Vec<String> {
     let mut failures = Vec::new();
-    let (shift_x, shift_y, peak_ncc) = match global {
-        Some(g) => (g.dx, g.dy, g.peak),
-        None => {
-            failures.push("no overlap of valid pixels to register".to_string());
-            (f64::NAN, f64::NAN, 0.0)
-        }
-    };
-    let shift = shift_x.hypot(shift_y);
+    if !registered {
+        failures.push("no overlap of valid pixels to register".to_string());
+    }
+    let shift = report.shift();
     if shift.is_finite() && shift >= params.max_shift_px {
         failures.push(format!(
             "moved by {shift:.2} px (limit {:.2})",
             params.max_shift_px
         ));
     }
+    let edge_score = report.edge_score;
     if edge_score < params.min_edge_score {
         failures.push(format!(
             "edges disagree: score {edge_score:.3} < {:.3}",
             params.min_edge_score
         ));
     }
+    let sharpness_ratio = report.sharpness_ratio;
     if sharpness_ratio < params.min_sharpness_ratio {
         failures.push(format!(
             "blurred: sharpness ratio {sharpness_ratio:.2} < {:.2}",
             params.min_sharpness_ratio
         ));
     }
-    if tiles_checked > 0 {
-        let share = tiles_misaligned as f64 / tiles_checked as f64;
-        if share > params.max_misaligned_tile_share {
-            failures.push(format!(
-                "locally warped: {tiles_misaligned} of {tiles_checked} tiles shifted by ≥ {:.2} px",
-                params.max_tile_shift_px
-            ));
-        }
+    let (checked, misaligned) = (report.tiles_checked, report.tiles_misaligned);
+    if checked > 0 && misaligned as f64 / checked as f64 > params.max_misaligned_tile_share {
+        failures.push(format!(
+            "locally warped: {misaligned} of {checked} tiles shifted by ≥ {:.2} px",
+            params.max_tile_shift_px
+        ));
     }
-    Ok(FidelityReport {
-        shift_x,
-        shift_y,
-        peak_ncc,
-        edge_score,
-        sharpness_ratio,
-        tiles_checked,
-        tiles_misaligned,
-        worst_tile_shift: worst,
-        passed: failures.is_empty(),
-        failures,
-    })
+    failures
 }
 
 /// Mean |4-neighbour Laplacian| over mean |central-difference gradient| of the grey image: how
