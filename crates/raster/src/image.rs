@@ -115,6 +115,18 @@ impl Image {
         &self.data[y * n..(y + 1) * n]
     }
 
+    /// An image of this one's size holding `data`, `channels` values per pixel (what a
+    /// per-pixel conversion of this image produced).
+    fn converted(&self, channels: usize, data: Vec<f32>) -> Image {
+        debug_assert_eq!(data.len(), self.width * self.height * channels);
+        Image {
+            width: self.width,
+            height: self.height,
+            channels,
+            data,
+        }
+    }
+
     /// One channel as a single-channel image.
     pub fn channel(&self, c: usize) -> Image {
         assert!(c < self.channels, "channel {c} out of {}", self.channels);
@@ -125,12 +137,7 @@ impl Image {
             .step_by(self.channels)
             .copied()
             .collect();
-        Image {
-            width: self.width,
-            height: self.height,
-            channels: 1,
-            data,
-        }
+        self.converted(1, data)
     }
 
     /// The image as RGB, the way the reference scripts read rasters: grey (± alpha) repeated,
@@ -150,12 +157,7 @@ impl Image {
                 }
             })
             .collect();
-        Image {
-            width: self.width,
-            height: self.height,
-            channels: 3,
-            data,
-        }
+        self.converted(3, data)
     }
 
     /// A grey-level version: the mean of the first three channels of a colour image (the first
@@ -169,12 +171,7 @@ impl Image {
                     .chunks_exact(c)
                     .map(|p| (p[0] + p[1] + p[2]) / 3.0)
                     .collect();
-                Image {
-                    width: self.width,
-                    height: self.height,
-                    channels: 1,
-                    data,
-                }
+                self.converted(1, data)
             }
         }
     }

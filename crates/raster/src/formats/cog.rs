@@ -13,8 +13,8 @@ use std::path::Path;
 use flate2::write::ZlibEncoder;
 use rayon::prelude::*;
 
+use super::support::write_atomically;
 use super::tiff::{geo_tags, GeoTags, TAG_RPC};
-use super::write_atomically;
 use super::GeoTiffMeta;
 use crate::{Image, RasterError, Result};
 

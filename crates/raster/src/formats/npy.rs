@@ -6,7 +6,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::{read_bytes, write_atomically};
+use super::support::{read_bytes, write_atomically};
 use crate::{Image, RasterError, Result};
 
 const MAGIC: &[u8] = b"\x93NUMPY";

@@ -8,7 +8,8 @@ use std::path::Path;
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, ZipArchive, ZipWriter};
 
-use super::{no_panic, npy, write_atomically};
+use super::npy;
+use super::support::{no_panic, write_atomically};
 use crate::{Homography, RasterError, Result};
 
 /// Largest member we are willing to read: a 3×3 array is about 200 bytes.

@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::{alloc_samples, checked_samples, read_bytes, write_atomically};
+use super::support::{alloc_samples, checked_samples, read_bytes, write_atomically};
 use crate::{Image, RasterError, Result};
 
 /// Reads a PFM file.

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use png::{BitDepth, ColorType, Decoder, Encoder, Transformations};
 
-use super::{alloc_samples, checked_samples, no_panic, write_atomically};
+use super::support::{alloc_samples, checked_samples, no_panic, write_atomically};
 use crate::{Image, RasterError, Result};
 
 /// Bit depth of a written PNG.

@@ -13,7 +13,7 @@ use tiff::encoder::colortype::ColorType;
 use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffKind};
 use tiff::tags::{PhotometricInterpretation, PlanarConfiguration, SampleFormat, Tag};
 
-use super::{alloc_samples, checked_samples, no_panic, write_atomically};
+use super::support::{alloc_samples, checked_samples, no_panic, write_atomically};
 use crate::{Image, RasterError, Result};
 
 pub(super) const TAG_RPC: u16 = 50844;
