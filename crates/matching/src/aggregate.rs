@@ -139,6 +139,23 @@ pub(crate) struct Dims {
     pub n_disp: usize,
 }
 
+impl Dims {
+    /// `(width, height, n_disp)`.
+    #[inline(always)]
+    pub fn sizes(self) -> (usize, usize, usize) {
+        (self.width, self.height, self.n_disp)
+    }
+
+    /// Asserts that `cost` and `sum` are volumes of these dimensions; false when they are empty
+    /// (nothing to aggregate).
+    pub fn check_volumes(self, cost: &[u8], sum: &[u16]) -> bool {
+        let len = self.width * self.height * self.n_disp;
+        assert_eq!(cost.len(), len);
+        assert_eq!(sum.len(), len);
+        len != 0
+    }
+}
+
 /// Aggregates `cost` into `sum` (both `height · width · n_disp`, `sum` fully overwritten).
 /// `diagonals`: 8 paths when true, 4 (horizontal and vertical) otherwise. `tick` is called
 /// once per row of each of the three stages.
@@ -150,24 +167,27 @@ pub(crate) fn aggregate(
     diagonals: bool,
     tick: &(dyn Fn() + Sync),
 ) {
-    let Dims {
-        width: w,
-        height: h,
-        n_disp: n,
-    } = dims;
-    assert_eq!(cost.len(), w * h * n);
-    assert_eq!(sum.len(), w * h * n);
-    if w == 0 || h == 0 || n == 0 {
+    if !dims.check_volumes(cost, sum) {
         return;
     }
+    let (w, n) = (dims.width, dims.n_disp);
     let avx2 = has_avx2();
+    // The `u16::MAX` state before the first pixel of a row, shared by every row.
+    let start = vec![u16::MAX; n + 2];
     sum.par_chunks_mut(w * n)
         .zip(cost.par_chunks(w * n))
         .enumerate()
         .for_each_init(
-            || vec![u16::MAX; 3 * (n + 2)],
-            |buf, (y, (srow, crow))| {
-                horizontal_row(avx2, crow, srow, y, dims, pen, buf);
+            || vec![u16::MAX; 2 * (n + 2)],
+            |lines, (y, (srow, crow))| {
+                let row = RowSweep {
+                    crow,
+                    n,
+                    base: y * w,
+                    pen,
+                    start: &start,
+                };
+                horizontal_row(avx2, &row, srow, lines);
                 tick();
             },
         );
@@ -184,41 +204,16 @@ pub(crate) fn aggregate(
 }
 
 avx2_dispatch! {
-    fn horizontal_row => horizontal_row_impl(
-        crow: &[u8],
-        srow: &mut [u16],
-        y: usize,
-        dims: Dims,
-        pen: &Penalties,
-        buf: &mut [u16],
-    )
+    fn horizontal_row => horizontal_row_impl(row: &RowSweep, srow: &mut [u16], lines: &mut [u16])
 }
 
-/// Left→right then right→left along row `y`. `buf` holds `3 · (n + 2)` values, all
-/// `u16::MAX` on entry (its sentinels stay so).
+/// Left→right then right→left along one row. `lines` holds two line buffers of `n + 2` values,
+/// all `u16::MAX` on entry (their sentinels stay so).
 #[inline(always)]
-fn horizontal_row_impl(
-    crow: &[u8],
-    srow: &mut [u16],
-    y: usize,
-    dims: Dims,
-    pen: &Penalties,
-    buf: &mut [u16],
-) {
-    let (w, n) = (dims.width, dims.n_disp);
-    let np = n + 2;
-    let (start, rest) = buf.split_at_mut(np);
-    let (a, b) = rest.split_at_mut(np);
-    let start: &[u16] = start;
-    let base = y * w;
+fn horizontal_row_impl(row: &RowSweep, srow: &mut [u16], lines: &mut [u16]) {
+    let w = srow.len() / row.n;
+    let (a, b) = lines.split_at_mut(row.n + 2);
     // Left to right assigns, right to left adds.
-    let row = RowSweep {
-        crow,
-        n,
-        base,
-        pen,
-        start,
-    };
     row.sweep::<true>(srow, a, b, 0..w, |x| x - 1);
     row.sweep::<false>(srow, a, b, (0..w).rev(), |x| x + 1);
 }
@@ -311,11 +306,7 @@ impl Sweep {
         avx2: bool,
         tick: &(dyn Fn() + Sync),
     ) {
-        let Dims {
-            width: w,
-            height: h,
-            n_disp: n,
-        } = dims;
+        let (w, h, n) = dims.sizes();
         let np = n + 2;
         // Enough chunks to balance threads, few enough to keep the per-row join cheap.
         let threads = rayon::current_num_threads().max(1);
@@ -468,11 +459,7 @@ mod tests {
 
     /// Straightforward SGM in `i64`, one direction at a time.
     fn reference(cost: &[u8], dims: Dims, pen: &Penalties, diagonals: bool) -> Vec<u16> {
-        let Dims {
-            width: w,
-            height: h,
-            n_disp: n,
-        } = dims;
+        let (w, h, n) = dims.sizes();
         let mut dirs = vec![(1i64, 0i64), (-1, 0), (0, 1), (0, -1)];
         if diagonals {
             dirs.extend([(1, 1), (-1, 1), (1, -1), (-1, -1)]);

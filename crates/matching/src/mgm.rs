@@ -173,17 +173,11 @@ pub(crate) fn aggregate_mgm(
     pen: &Penalties,
     tick: &(dyn Fn() + Sync),
 ) {
-    let Dims {
-        width: w,
-        height: h,
-        n_disp: n,
-    } = dims;
-    assert_eq!(cost.len(), w * h * n);
-    assert_eq!(sum.len(), w * h * n);
-    sum.fill(0);
-    if w == 0 || h == 0 || n == 0 {
+    if !dims.check_volumes(cost, sum) {
         return;
     }
+    sum.fill(0);
+    let h = dims.height;
     let avx2 = has_avx2();
     for (i, scan) in SCANS.iter().enumerate() {
         let ticks = if i % 3 == 0 { h } else { 0 };
@@ -226,11 +220,7 @@ impl SumPtr {
 
 #[inline(always)]
 fn run_scan_impl(cost: &[u8], sum: &mut [u16], dims: Dims, pen: &Penalties, scan: Scan) {
-    let Dims {
-        width: w,
-        height: h,
-        n_disp: n,
-    } = dims;
+    let (w, h, n) = dims.sizes();
     let np = n + 2;
     let (n_lines, len) = if scan.rows { (h, w) } else { (w, h) };
     // Flat pixel index of position `v` on line `u`.
@@ -330,11 +320,7 @@ mod tests {
     /// MGM written out directly in `i64`: every direction with its two predecessors, a full
     /// `L` volume per direction, pixels in an order where predecessors come first.
     fn reference(cost: &[u8], dims: Dims, pen: &Penalties) -> Vec<u16> {
-        let Dims {
-            width: w,
-            height: h,
-            n_disp: n,
-        } = dims;
+        let (w, h, n) = dims.sizes();
         let dirs = raster::geometry::EIGHT_DIRECTIONS;
         let mut total = vec![0i64; w * h * n];
         for (rx, ry) in dirs {

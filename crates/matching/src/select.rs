@@ -32,11 +32,7 @@ pub(crate) fn select(
     sel: &Selection,
     tick: &(dyn Fn() + Sync),
 ) -> Vec<f32> {
-    let Dims {
-        width: w,
-        height: h,
-        n_disp: n,
-    } = dims;
+    let (w, h, n) = dims.sizes();
     let mut out = vec![f32::NAN; w * h];
     if w == 0 || n == 0 {
         return out;
@@ -81,6 +77,9 @@ unsafe fn select_row_avx2(
     select_row(srow, n, valid, sel, orow, best_k, best_r)
 }
 
+/// Marks a pixel without a selected disparity in `best_k`.
+const NONE: usize = usize::MAX;
+
 /// One row: `srow` is `width · n`, `valid` the left and right validity of the row.
 #[inline(always)]
 fn select_row(
@@ -92,96 +91,116 @@ fn select_row(
     best_k: &mut [usize],
     best_r: &mut [u32],
 ) {
-    const NONE: usize = usize::MAX;
     let w = orow.len();
     best_r.fill(u32::MAX);
     for (x, sx) in srow.chunks_exact(n).enumerate() {
-        // Right view: d_R(x_R) = argmin_d S(x_R + d, d), packed (cost, k) so `min` is an argmin
-        // that prefers the smallest disparity on ties.
         if sel.lr_tolerance.is_some() {
-            let base = x as i64 - sel.d_min as i64;
-            let k_hi = base.min(n as i64 - 1);
-            let k_lo = (base - w as i64 + 1).max(0);
-            if k_lo <= k_hi {
-                // `best_r` is stored mirrored (index w − 1 − x_R) so that k and the index grow
-                // together and the loop vectorises.
-                let j_lo = (w as i64 - 1 - base + k_lo) as usize;
-                let (k_lo, k_hi) = (k_lo as usize, k_hi as usize);
-                let len = k_hi - k_lo + 1;
-                for ((b, &s), k) in best_r[j_lo..j_lo + len]
-                    .iter_mut()
-                    .zip(&sx[k_lo..=k_hi])
-                    .zip(k_lo as u32..)
-                {
-                    *b = (*b).min((u32::from(s) << 16) | k);
-                }
-            }
+            fold_right_winners(sx, x, sel.d_min, best_r);
         }
         best_k[x] = NONE;
         orow[x] = f32::NAN;
         if !lvalid[x] {
             continue;
         }
-        // Packed (cost, k): the minimum is the argmin, the smallest disparity on ties.
-        let packed = sx
-            .iter()
-            .zip(0u32..)
-            .map(|(&s, k)| (u32::from(s) << 16) | k)
-            .min()
-            .unwrap_or(0);
-        let (m, k) = ((packed >> 16) as u16, (packed & 0xFFFF) as usize);
+        let (m, k) = winner(sx);
         // The match must land inside the right image, on a valid pixel.
         let xr = x as i64 - (sel.d_min as i64 + k as i64);
         if xr < 0 || xr >= w as i64 || !rvalid[xr as usize] {
             continue;
         }
-        if let Some(u) = sel.uniqueness {
-            let left = sx[..k.saturating_sub(1)].iter().copied().min();
-            let right = sx.get(k + 2..).and_then(|s| s.iter().copied().min());
-            let second = left.into_iter().chain(right).min();
-            if let Some(second) = second {
-                if f32::from(m) >= (1.0 - u) * f32::from(second) {
-                    continue;
-                }
-            }
+        if sel.uniqueness.is_some_and(|u| is_ambiguous(sx, m, k, u)) {
+            continue;
         }
         let mut d = (sel.d_min as i64 + k as i64) as f32;
         if k > 0 && k + 1 < n {
             let (cm, c0, cp) = (f32::from(sx[k - 1]), f32::from(m), f32::from(sx[k + 1]));
-            d += match sel.subpixel {
-                Subpixel::None => 0.0,
-                Subpixel::Parabola => {
-                    let den = cm - 2.0 * c0 + cp;
-                    if den > 0.0 {
-                        (cm - cp) / (2.0 * den)
-                    } else {
-                        0.0
-                    }
-                }
-                Subpixel::Equiangular => {
-                    let den = cm.max(cp) - c0;
-                    if den > 0.0 {
-                        (cm - cp) / (2.0 * den)
-                    } else {
-                        0.0
-                    }
-                }
-            };
+            d += subpixel_offset(sel.subpixel, cm, c0, cp);
         }
         orow[x] = d;
         best_k[x] = k;
     }
     if let Some(tol) = sel.lr_tolerance {
-        for x in 0..w {
-            let k = best_k[x];
-            if k == NONE {
-                continue;
-            }
-            let xr = (x as i64 - (sel.d_min as i64 + k as i64)) as usize;
-            let kr = (best_r[w - 1 - xr] & 0xFFFF) as f32;
-            if (k as f32 - kr).abs() > tol {
-                orow[x] = f32::NAN;
-            }
+        check_left_right(orow, best_k, best_r, sel.d_min, tol);
+    }
+}
+
+/// Folds the costs `sx` of left pixel `x` into the right view's winners:
+/// `d_R(x_R) = argmin_d S(x_R + d, d)`, packed (cost, k) so `min` is an argmin that prefers the
+/// smallest disparity on ties. `best_r` is stored mirrored (index `w − 1 − x_R`) so that k and
+/// the index grow together and the loop vectorises.
+#[inline(always)]
+fn fold_right_winners(sx: &[u16], x: usize, d_min: i32, best_r: &mut [u32]) {
+    let (n, w) = (sx.len(), best_r.len());
+    let base = x as i64 - d_min as i64;
+    let k_hi = base.min(n as i64 - 1);
+    let k_lo = (base - w as i64 + 1).max(0);
+    if k_lo > k_hi {
+        return;
+    }
+    let j_lo = (w as i64 - 1 - base + k_lo) as usize;
+    let (k_lo, k_hi) = (k_lo as usize, k_hi as usize);
+    let len = k_hi - k_lo + 1;
+    for ((b, &s), k) in best_r[j_lo..j_lo + len]
+        .iter_mut()
+        .zip(&sx[k_lo..=k_hi])
+        .zip(k_lo as u32..)
+    {
+        *b = (*b).min((u32::from(s) << 16) | k);
+    }
+}
+
+/// The lowest cost of `sx` and its index, the smallest index on ties (packed (cost, k): the
+/// minimum is the argmin).
+#[inline(always)]
+fn winner(sx: &[u16]) -> (u16, usize) {
+    let packed = sx
+        .iter()
+        .zip(0u32..)
+        .map(|(&s, k)| (u32::from(s) << 16) | k)
+        .min()
+        .unwrap_or(0);
+    ((packed >> 16) as u16, (packed & 0xFFFF) as usize)
+}
+
+/// Whether the winner `m` at `k` fails the uniqueness test of ratio `u`: it is not below
+/// `(1 − u)` times the best cost more than one disparity away.
+#[inline(always)]
+fn is_ambiguous(sx: &[u16], m: u16, k: usize, u: f32) -> bool {
+    let left = sx[..k.saturating_sub(1)].iter().copied().min();
+    let right = sx.get(k + 2..).and_then(|s| s.iter().copied().min());
+    let second = left.into_iter().chain(right).min();
+    second.is_some_and(|second| f32::from(m) >= (1.0 - u) * f32::from(second))
+}
+
+/// Sub-pixel offset of the winner from its cost `c0` and its neighbours' `cm`, `cp`.
+#[inline(always)]
+fn subpixel_offset(fit: Subpixel, cm: f32, c0: f32, cp: f32) -> f32 {
+    let den = match fit {
+        Subpixel::None => return 0.0,
+        Subpixel::Parabola => cm - 2.0 * c0 + cp,
+        Subpixel::Equiangular => cm.max(cp) - c0,
+    };
+    if den > 0.0 {
+        (cm - cp) / (2.0 * den)
+    } else {
+        0.0
+    }
+}
+
+/// Left–right consistency: clears the disparities whose right-view winner disagrees by more
+/// than `tol` disparities.
+#[inline(always)]
+fn check_left_right(orow: &mut [f32], best_k: &[usize], best_r: &[u32], d_min: i32, tol: f32) {
+    let w = orow.len();
+    for x in 0..w {
+        let k = best_k[x];
+        if k == NONE {
+            continue;
+        }
+        let xr = (x as i64 - (d_min as i64 + k as i64)) as usize;
+        let kr = (best_r[w - 1 - xr] & 0xFFFF) as f32;
+        if (k as f32 - kr).abs() > tol {
+            orow[x] = f32::NAN;
         }
     }
 }

@@ -291,6 +291,56 @@ pub(crate) fn match_grey(
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Vec<f32>, MatchError> {
     let n = params.validate(range)?;
+    let (mut cost, mut sum) = allocate_volumes(w, h, n, params)?;
+    let steps = 4 * h + if params.median { h } else { 0 };
+    let progress = Progress::new(steps, progress);
+    let tick = || progress.tick();
+    let dims = Dims {
+        width: w,
+        height: h,
+        n_disp: n,
+    };
+
+    let (left_valid, right_valid) = census_costs(lg, rg, dims, range, params, &mut cost);
+    let adaptation = params.p2_adaptive.map(|k| (normalised(lg), k));
+    let pen = Penalties {
+        p1: params.p1,
+        p2: params.p2,
+        adapt: adaptation.as_ref().map(|(grey, k)| (&grey[..], *k)),
+    };
+    aggregate_costs(&cost, &mut sum, dims, &pen, params, &tick);
+    drop(cost);
+
+    let mut disp = select(
+        &sum,
+        dims,
+        &left_valid,
+        &right_valid,
+        &selection(range, params),
+        &tick,
+    );
+    drop(sum);
+    if params.median {
+        disp = median3x3(&disp, w, h);
+        for _ in 0..h {
+            tick();
+        }
+    }
+    if let Some(sp) = &params.speckle {
+        remove_speckles(&mut disp, w, h, sp);
+    }
+    clear_off_image(&mut disp, w, &right_valid);
+    Ok(disp)
+}
+
+/// Both volumes (census costs and aggregated costs) up front, so that an impossible request fails
+/// before any work: over `max_memory`, over the address space, or refused by the allocator.
+fn allocate_volumes(
+    w: usize,
+    h: usize,
+    n: usize,
+    params: &SgmParams,
+) -> Result<(Vec<u8>, Vec<u16>), MatchError> {
     let needed = memory_bytes(w, h, n);
     if let Some(limit) = params.max_memory {
         if needed > limit {
@@ -305,60 +355,49 @@ pub(crate) fn match_grey(
             limit: isize::MAX as usize,
         })?;
     let too_large = |_| MatchError::OutOfMemory { needed };
-    // Both volumes up front, so an impossible request fails before any work.
-    let mut cost: Vec<u8> = zeroed(vol_len).map_err(too_large)?;
-    let mut sum: Vec<u16> = zeroed(vol_len).map_err(too_large)?;
+    let cost: Vec<u8> = zeroed(vol_len).map_err(too_large)?;
+    let sum: Vec<u16> = zeroed(vol_len).map_err(too_large)?;
+    Ok((cost, sum))
+}
 
-    let steps = 4 * h + if params.median { h } else { 0 };
-    let progress = Progress::new(steps, progress);
-    let tick = || progress.tick();
-
+/// Census transforms of both views and their Hamming distances into `cost`; returns the
+/// validity of the left and right pixels (the census codes are dropped at once: they are the
+/// largest buffers after the volumes).
+fn census_costs(
+    lg: &[f32],
+    rg: &[f32],
+    dims: Dims,
+    range: DisparityRange,
+    params: &SgmParams,
+    cost: &mut [u8],
+) -> (Vec<bool>, Vec<bool>) {
+    let (w, h) = (dims.width, dims.height);
     let lc = census_transform(lg, w, h, params.census);
     let rc = census_transform(rg, w, h, params.census);
-    build_cost_volume(
-        &lc,
-        &rc,
-        range.0,
-        n,
-        (params.census.bits() / 2) as u8,
-        &mut cost,
-    );
-    drop(lc.codes);
-    drop(rc.codes);
+    let invalid_cost = (params.census.bits() / 2) as u8;
+    build_cost_volume(&lc, &rc, range.0, dims.n_disp, invalid_cost, cost);
+    (lc.valid, rc.valid)
+}
 
-    let norm;
-    let adapt = match params.p2_adaptive {
-        Some(k) => {
-            norm = normalised(lg);
-            Some((&norm[..], k))
-        }
-        None => None,
-    };
-    let pen = Penalties {
-        p1: params.p1,
-        p2: params.p2,
-        adapt,
-    };
-    let dims = Dims {
-        width: w,
-        height: h,
-        n_disp: n,
-    };
+/// Aggregates `cost` into `sum` with the configured method (MGM, or SGM over 4 or 8 paths).
+fn aggregate_costs(
+    cost: &[u8],
+    sum: &mut [u16],
+    dims: Dims,
+    pen: &Penalties,
+    params: &SgmParams,
+    tick: &(dyn Fn() + Sync),
+) {
     match params.aggregation {
-        Aggregation::Sgm => aggregate(
-            &cost,
-            &mut sum,
-            dims,
-            &pen,
-            params.paths == Paths::Eight,
-            &tick,
-        ),
-        Aggregation::Mgm => aggregate_mgm(&cost, &mut sum, dims, &pen, &tick),
+        Aggregation::Sgm => aggregate(cost, sum, dims, pen, params.paths == Paths::Eight, tick),
+        Aggregation::Mgm => aggregate_mgm(cost, sum, dims, pen, tick),
     }
     debug_assert!(params.paths.count() * (64 + params.p2 as usize) < 65536);
-    drop(cost);
+}
 
-    let sel = Selection {
+/// The selection rules of `params` for disparities from `range.0` up.
+fn selection(range: DisparityRange, params: &SgmParams) -> Selection {
+    Selection {
         d_min: range.0,
         lr_tolerance: params.lr_tolerance,
         uniqueness: params.uniqueness,
@@ -367,29 +406,20 @@ pub(crate) fn match_grey(
         } else {
             Subpixel::None
         },
-    };
-    let mut disp = select(&sum, dims, &lc.valid, &rc.valid, &sel, &tick);
-    drop(sum);
-    if params.median {
-        disp = median3x3(&disp, w, h);
-        for _ in 0..h {
-            tick();
-        }
     }
-    if let Some(sp) = &params.speckle {
-        remove_speckles(&mut disp, w, h, sp);
-    }
-    // The sub-pixel fit and the median may move a match by a pixel: check again that it lands
-    // inside the right image, on a valid pixel.
+}
+
+/// The sub-pixel fit and the median may move a match by a pixel: clears the disparities that no
+/// longer land inside the right image, on a valid pixel.
+fn clear_off_image(disp: &mut [f32], w: usize, right_valid: &[bool]) {
     disp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         for (x, d) in row.iter_mut().enumerate() {
             let xr = (x as f32 - *d).round();
-            if !(xr >= 0.0 && xr < w as f32 && rc.valid[y * w + xr as usize]) {
+            if !(xr >= 0.0 && xr < w as f32 && right_valid[y * w + xr as usize]) {
                 *d = f32::NAN;
             }
         }
     });
-    Ok(disp)
 }
 
 /// A zeroed vector of `len` elements, or an error when it cannot be allocated. The zeroing (and
