@@ -233,8 +233,22 @@ pub fn augment_sample(
     config.validate()?;
     check_sample(sample)?;
     let mut s = sample.clone();
+    scale_and_stretch(&mut s, config, rng)?;
+    // Flips are vertical only (validated).
+    if config.do_flip && rng.chance(config.v_flip_prob) {
+        flip_vertically(&mut s);
+    }
+    random_crop(&mut s, config, rng)?;
+    overlap_shift(&mut s, config, rng);
+    jitter_input_colours(&mut s, config, rng);
+    if rng.chance(config.eraser_prob) {
+        erase(&mut s.input_right, config, rng);
+    }
+    Ok(s)
+}
 
-    // 1. Scale and stretch.
+/// Step 1: a random isotropic scale, sometimes stretched per axis; disparities scale with x.
+fn scale_and_stretch(s: &mut Sample, config: &AugmentConfig, rng: &mut SplitMix64) -> Result<()> {
     let (w, h) = s.teacher.size();
     let scale = 2f64.powf(rng.uniform(config.min_scale, config.max_scale));
     let (mut sx, mut sy) = (scale, scale);
@@ -245,38 +259,42 @@ pub fn augment_sample(
     let nw = ((w as f64 * sx) as usize).max(1);
     let nh = ((h as f64 * sy) as usize).max(1);
     if (nw, nh) != (w, h) {
-        for image in images_mut(&mut s) {
+        for image in images_mut(s) {
             *image = resize_antialias_bilinear(image, nw, nh)?;
         }
         let building = resize_antialias_bilinear(&s.building_left.to_image(), nw, nh)?;
         s.building_left = threshold(&building);
         s.valid_left = resize_nearest(&s.valid_left, nw, nh);
         let x_scale = nw as f32 / w as f32;
-        for d in disparities_mut(&mut s) {
+        for d in disparities_mut(s) {
             *d = resize_bilinear(d, nw, nh);
             d.data_mut().iter_mut().for_each(|v| *v *= x_scale);
         }
     }
+    Ok(())
+}
 
-    // 2. Flips: vertical only (validated).
-    if config.do_flip && rng.chance(config.v_flip_prob) {
-        for image in rasters_mut(&mut s) {
-            *image = flip_vertical(image);
-        }
-        s.valid_left = threshold(&flip_vertical(&s.valid_left.to_image()));
-        s.building_left = threshold(&flip_vertical(&s.building_left.to_image()));
+/// Step 2: every raster and mask upside down (rows of a rectified pair stay matched).
+fn flip_vertically(s: &mut Sample) {
+    for image in rasters_mut(s) {
+        *image = flip_vertical(image);
     }
+    s.valid_left = threshold(&flip_vertical(&s.valid_left.to_image()));
+    s.building_left = threshold(&flip_vertical(&s.building_left.to_image()));
+}
 
-    // 3. Random crop (pad first when smaller).
+/// Step 3: a random crop of the configured size (reflect-padded first when the sample is
+/// smaller), the input right image optionally jittered by ±2 rows.
+fn random_crop(s: &mut Sample, config: &AugmentConfig, rng: &mut SplitMix64) -> Result<()> {
     let (th, tw) = (config.crop_height, config.crop_width);
     let (w, h) = s.teacher.size();
     if h < th || w < tw {
         let (pw, ph) = (w.max(tw), h.max(th));
-        for image in images_mut(&mut s) {
+        for image in images_mut(s) {
             *image = pad(image, pw, ph, Padding::Reflect);
         }
         s.building_left = threshold(&pad(&s.building_left.to_image(), pw, ph, Padding::Reflect));
-        for d in disparities_mut(&mut s) {
+        for d in disparities_mut(s) {
             *d = pad(d, pw, ph, Padding::Replicate);
         }
         s.valid_left = threshold(&pad(&s.valid_left.to_image(), pw, ph, Padding::Zero));
@@ -294,26 +312,33 @@ pub fn augment_sample(
     s.input_right = crop(&s.input_right, y_right)?;
     s.real_left = crop(&s.real_left, y0)?;
     s.real_right = crop(&s.real_right, y0)?;
-    for d in disparities_mut(&mut s) {
+    for d in disparities_mut(s) {
         *d = crop(d, y0)?;
     }
     s.valid_left = threshold(&crop(&s.valid_left.to_image(), y0)?);
     s.building_left = threshold(&crop(&s.building_left.to_image(), y0)?);
+    Ok(())
+}
 
-    // 4. Overlap shift of both right images.
+/// Step 4: both right images shifted left by an exponential draw (less overlap), disparities
+/// reduced to match.
+fn overlap_shift(s: &mut Sample, config: &AugmentConfig, rng: &mut SplitMix64) {
+    let tw = config.crop_width;
     if rng.chance(config.shift_prob) {
         let cap = config.shift_max.unwrap_or(tw / 2);
         let shift = ((-(1.0 - rng.unit()).ln() * config.shift_scale) as usize).min(cap);
         if shift > 0 {
             s.input_right = shift_left(&s.input_right, shift);
             s.real_right = shift_left(&s.real_right, shift);
-            for d in disparities_mut(&mut s) {
+            for d in disparities_mut(s) {
                 shift_disparity(d, shift);
             }
         }
     }
+}
 
-    // 5. Colour jitter + gamma of the input pair.
+/// Step 5: colour jitter (sometimes drawn separately per view) and gamma of the input pair.
+fn jitter_input_colours(s: &mut Sample, config: &AugmentConfig, rng: &mut SplitMix64) {
     let (left, right) = if rng.chance(config.asymmetric_prob) {
         let a = Jitter::draw(config, rng);
         let b = Jitter::draw(config, rng);
@@ -326,12 +351,6 @@ pub fn augment_sample(
     let gain = rng.uniform(config.gamma_range[2], config.gamma_range[3]) as f32;
     s.input_left = adjust_gamma(left, gamma, gain);
     s.input_right = adjust_gamma(right, gamma, gain);
-
-    // 6. Eraser on the input right image.
-    if rng.chance(config.eraser_prob) {
-        erase(&mut s.input_right, config, rng);
-    }
-    Ok(s)
 }
 
 fn check_sample(s: &Sample) -> Result<()> {
