@@ -24,6 +24,7 @@
 use anyhow::{bail, Result};
 use dataset::segmentation::{class_mask, MaskKind, MaskOptions, Segmentation};
 use raster::Image;
+use world::class;
 
 use super::heights::ImageHeights;
 use super::offline::CLASSES;
@@ -35,20 +36,45 @@ pub const VEGETATION_EXG: f64 = 0.025;
 pub const TREE_HEIGHT_M: f32 = 2.0;
 /// Filled height above ground of a building, metres.
 pub const BUILDING_HEIGHT_M: f32 = 2.5;
-/// Water: brightness (mean of R, G, B in 0–1), local std over 15×15, height.
-const WATER_BRIGHTNESS: f64 = 0.16;
-const WATER_STD: f64 = 0.03;
-const WATER_HEIGHT_M: f32 = 1.0;
-/// Blue water: 7×7 mean blue chroma above this, mean brightness below the second.
-const WATER_BLUE: f64 = 0.25;
-const WATER_BLUE_BRIGHTNESS: f64 = 0.3;
+/// The water rule (BENCHMARKS.md, "Masks on real imagery"): low, and either dark and smooth
+/// or blue.
+struct WaterRule {
+    /// Filled height above ground below which a pixel can be water, metres.
+    below_height_m: f32,
+    /// Dark and smooth: mean brightness (of R, G, B in 0–1) and local std over 15×15 below these.
+    dark_brightness: f64,
+    smooth_std: f64,
+    /// Blue: 7×7 mean blue chroma above the first, mean brightness below the second.
+    blue_chroma: f64,
+    blue_brightness: f64,
+}
+
+const WATER_RULE: WaterRule = WaterRule {
+    below_height_m: 1.0,
+    dark_brightness: 0.16,
+    smooth_std: 0.03,
+    blue_chroma: 0.25,
+    blue_brightness: 0.3,
+};
+
+impl WaterRule {
+    /// Whether a pixel of filled height `filled`, mean brightness `mean`, local std `spread` and
+    /// mean blue chroma `blue` is water. Unknown heights (NaN) do not rule water out; green
+    /// water is still water.
+    fn holds(&self, filled: f32, mean: f64, spread: f64, blue: f64) -> bool {
+        let low = filled.is_nan() || filled < self.below_height_m;
+        let dark_smooth = mean < self.dark_brightness && spread < self.smooth_std;
+        let blue_water = blue > self.blue_chroma && mean < self.blue_brightness;
+        low && (dark_smooth || blue_water)
+    }
+}
 
 /// OpenEarthMap ids of the class map.
-const RANGELAND: usize = 2;
-const DEVELOPED: usize = 3;
-const TREE: usize = 5;
-const WATER: usize = 6;
-const BUILDING: usize = 8;
+const RANGELAND: usize = class::RANGELAND as usize;
+const DEVELOPED: usize = class::DEVELOPED as usize;
+const TREE: usize = class::TREE as usize;
+const WATER: usize = class::WATER as usize;
+const BUILDING: usize = class::BUILDING as usize;
 
 /// The class of every pixel of an 8-bit RGB (or grey) image, with or without heights.
 pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
@@ -96,11 +122,7 @@ pub fn classify(image: &Image, heights: Option<&ImageHeights>) -> Vec<usize> {
             };
             let measured = hg.measured.data()[i];
             let filled = hg.filled.data()[i];
-            // Unknown heights (NaN) do not rule water out; green water is still water.
-            let low = filled.is_nan() || filled < WATER_HEIGHT_M;
-            let dark_smooth = mean[i] < WATER_BRIGHTNESS && spread[i] < WATER_STD;
-            let blue_water = blue[i] > WATER_BLUE && mean[i] < WATER_BLUE_BRIGHTNESS;
-            if low && (dark_smooth || blue_water) {
+            if WATER_RULE.holds(filled, mean[i], spread[i], blue[i]) {
                 WATER
             } else if vegetation {
                 let raised = !measured.is_finite() || measured > TREE_HEIGHT_M;
