@@ -179,6 +179,11 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
     })
 }
 
+/// `reconstruct`'s hole filling distance, cells; the masks' heights fill their DSMs alike.
+pub const DEFAULT_FILL_CELLS: usize = 40;
+/// `reconstruct`'s median window after filling, cells (odd); shared with the masks' heights.
+pub const DEFAULT_MEDIAN_CELLS: usize = 7;
+
 /// The post-processing of a gridded DSM: hole filling within `fill_holes` cells
 /// ([`camera::fill_holes`]), then a NaN-aware median filter over an odd `median_filter` window.
 pub fn finish_dsm(

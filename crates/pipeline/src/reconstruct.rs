@@ -28,7 +28,7 @@ use dataset::shard::Shard;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::dsm::{finish_dsm, DsmSummary, GridChoice};
+use crate::dsm::{finish_dsm, DsmSummary, GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
 use crate::progress::Progress;
@@ -109,8 +109,8 @@ impl ReconstructOptions {
             work_dir: None,
             grid,
             gridding: Gridding::Median,
-            fill_holes: Some(40),
-            median_filter: Some(7),
+            fill_holes: Some(DEFAULT_FILL_CELLS),
+            median_filter: Some(DEFAULT_MEDIAN_CELLS),
             border: 0,
             truth: None,
             tile: 1024,

@@ -18,15 +18,13 @@ use camera::{Points, RpcModel, UtmZone};
 use raster::Image;
 
 use super::project::render_into_image;
-use crate::dsm::{finish_dsm, read_camera, triangulate_files};
-use crate::pairs::PairFolder;
-use crate::rectify::{RectifiedFiles, RectifyRecord};
+use crate::dsm::{
+    finish_dsm, read_camera, triangulate_files, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS,
+};
+use crate::pairs::{PairFolder, RectifiedFiles, RectifyRecord};
 
 /// Cell size of the heights grid, metres.
 const RESOLUTION: f64 = 0.5;
-/// Hole filling distance (cells) and median window of the filled DSM: `reconstruct`'s defaults.
-const FILL_CELLS: usize = 40;
-const MEDIAN_CELLS: usize = 7;
 /// The ground is the lower envelope of the DSM at this scale: an opening of 60 m removes trees
 /// and most buildings (wider roofs are rare; see BENCHMARKS.md, masks).
 const GROUND_WINDOW_M: f64 = 60.0;
@@ -332,7 +330,11 @@ pub fn image_heights(
         lonlatalt: all,
     };
     let measured = rasterize(&points, &grid, Gridding::Median);
-    let filled = finish_dsm(measured.clone(), Some(FILL_CELLS), Some(MEDIAN_CELLS))?;
+    let filled = finish_dsm(
+        measured.clone(),
+        Some(DEFAULT_FILL_CELLS),
+        Some(DEFAULT_MEDIAN_CELLS),
+    )?;
     let ground = ground_level(&filled, RESOLUTION);
     let above = |dsm: &Image| {
         let data = dsm
