@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use pipeline::curate::{self, features, ColourStatistic, CurateOptions, SsimScale};
+use pipeline::stages::curate::{self, features, ColourStatistic, CurateOptions, SsimScale};
 use pipeline::Progress;
 
 use crate::args::{report, DeviceArg, ShardArg};

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use dataset::Subset;
-use pipeline::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
-use pipeline::world_training::{build_world_training, WorldTrainingOptions};
+use pipeline::stages::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
+use pipeline::stages::world_training::{build_world_training, WorldTrainingOptions};
 use pipeline::Progress;
 
 use crate::args::{SgmArgs, ShardArg};

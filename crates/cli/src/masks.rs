@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use pipeline::masks::heights::PairIndex;
-use pipeline::masks::{
+use pipeline::stages::masks::heights::PairIndex;
+use pipeline::stages::masks::{
     self, MasksOptions, MasksRecord, OfflineSegmenter, RulesSegmenter, SegformerSegmenter,
 };
 use pipeline::Progress;

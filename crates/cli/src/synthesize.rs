@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use pipeline::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
+use pipeline::stages::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
 use pipeline::Progress;
 use synth::api::{GeminiConfig, GeminiGenerator};
 use synth::prompts::Prompts;

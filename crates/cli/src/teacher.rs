@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::teacher::{self, TeacherOptions};
+use pipeline::stages::teacher::{self, TeacherOptions};
 use pipeline::Progress;
 
 use crate::args::{parse_range, report, MatcherArgs, ShardArg};

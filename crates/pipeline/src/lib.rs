@@ -9,12 +9,9 @@
 //! pair's disparity range comes from). The learned networks sit behind the default feature
 //! `network`; without it everything else builds and tests without burn.
 
-pub mod curate;
-pub mod dataset_build;
 pub mod demo;
 pub mod dsm;
 pub mod eval;
-pub mod masks;
 pub mod matcher;
 pub mod metrics;
 pub mod pairs;
@@ -25,9 +22,7 @@ pub mod rectify;
 pub mod report;
 pub mod score;
 pub mod stage;
-pub mod synthesize;
-pub mod teacher;
+pub mod stages;
 pub mod world_io;
-pub mod world_training;
 
 pub use progress::{Progress, Silent};

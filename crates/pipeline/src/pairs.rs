@@ -16,11 +16,11 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use camera::rectify::Roi;
 use dataset::Side;
 use raster::formats::read_homographies;
 use raster::Homography;
-
-use crate::rectify::RectifyRecord;
+use serde::{Deserialize, Serialize};
 
 /// Extensions of rectified images, in order of preference.
 pub const IMAGE_EXTENSIONS: [&str; 2] = ["iio", "npy"];
@@ -236,4 +236,48 @@ fn image_stems(dir: &Path) -> Result<Vec<(String, PathBuf)>> {
         }
     }
     Ok(out)
+}
+
+/// The record of one rectified pair, `rectify/<stem>.json`: written by `rectify` and by
+/// `reconstruct --keep-intermediates`, read through [`PairFolder::rectify_record`]
+/// by `teacher` (the disparity range) and `masks --pairs` (the cameras and homographies).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RectifyRecord {
+    pub stem: String,
+    /// The raw images.
+    pub left: PathBuf,
+    pub right: PathBuf,
+    /// The JSON cameras, when the images' RPC tags were not used.
+    pub rpc_left: Option<PathBuf>,
+    pub rpc_right: Option<PathBuf>,
+    /// Region of the left raw image.
+    pub roi: Roi,
+    /// Altitudes of the scene, metres, and where they came from.
+    pub alt_range: (f64, f64),
+    #[serde(rename = "alt_range_source")]
+    pub alt_source: String,
+    /// Disparity search range of the rectified pair, pixels (inclusive).
+    pub disparity_range: (i32, i32),
+    /// `(width, height)` of the rectified images.
+    pub size: (usize, usize),
+    /// Where the region lies in the rectified frame.
+    pub roi_in_frame: Roi,
+    pub flipped: bool,
+    pub pixels_per_metre: f64,
+    pub max_row_error_px: f64,
+    /// Share of the region the right image covers.
+    pub right_coverage: f64,
+    #[serde(rename = "Hleft")]
+    pub h_left: [[f64; 3]; 3],
+    #[serde(rename = "Hright")]
+    pub h_right: [[f64; 3]; 3],
+    pub files: RectifiedFiles,
+}
+
+/// The files of a rectified pair.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RectifiedFiles {
+    pub left: PathBuf,
+    pub right: PathBuf,
+    pub homography: PathBuf,
 }

@@ -19,9 +19,8 @@ use camera::rectify::{rectify_pair, Rectification, Roi};
 use camera::RpcModel;
 use raster::formats::{write_homographies, write_npy};
 use raster::Image;
-use serde::{Deserialize, Serialize};
 
-use crate::pairs::{PairFolder, PairPaths};
+use crate::pairs::{PairFolder, PairPaths, RectifiedFiles, RectifyRecord};
 use crate::progress::{track, Progress};
 use crate::reconstruct::raw::RawImage;
 use crate::stage::write_json;
@@ -153,50 +152,6 @@ pub(crate) fn right_coverage(right: &Image, rect: &Rectification) -> f64 {
         }
     }
     covered as f64 / (rw * rh).max(1) as f64
-}
-
-/// The record of one rectified pair, `rectify/<stem>.json`: written by `rectify` and by
-/// `reconstruct --keep-intermediates`, read through [`crate::pairs::PairFolder::rectify_record`]
-/// by `teacher` (the disparity range) and `masks --pairs` (the cameras and homographies).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RectifyRecord {
-    pub stem: String,
-    /// The raw images.
-    pub left: PathBuf,
-    pub right: PathBuf,
-    /// The JSON cameras, when the images' RPC tags were not used.
-    pub rpc_left: Option<PathBuf>,
-    pub rpc_right: Option<PathBuf>,
-    /// Region of the left raw image.
-    pub roi: Roi,
-    /// Altitudes of the scene, metres, and where they came from.
-    pub alt_range: (f64, f64),
-    #[serde(rename = "alt_range_source")]
-    pub alt_source: String,
-    /// Disparity search range of the rectified pair, pixels (inclusive).
-    pub disparity_range: (i32, i32),
-    /// `(width, height)` of the rectified images.
-    pub size: (usize, usize),
-    /// Where the region lies in the rectified frame.
-    pub roi_in_frame: Roi,
-    pub flipped: bool,
-    pub pixels_per_metre: f64,
-    pub max_row_error_px: f64,
-    /// Share of the region the right image covers.
-    pub right_coverage: f64,
-    #[serde(rename = "Hleft")]
-    pub h_left: [[f64; 3]; 3],
-    #[serde(rename = "Hright")]
-    pub h_right: [[f64; 3]; 3],
-    pub files: RectifiedFiles,
-}
-
-/// The files of a rectified pair.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RectifiedFiles {
-    pub left: PathBuf,
-    pub right: PathBuf,
-    pub homography: PathBuf,
 }
 
 /// The raw inputs of a rectification, as recorded.

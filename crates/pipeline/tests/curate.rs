@@ -5,11 +5,11 @@ use std::path::Path;
 
 use dataset::Shard;
 use matching::SgmParams;
-use pipeline::curate::features::HistogramDescriptor;
-use pipeline::curate::select::{roc_auc, Keep};
-use pipeline::curate::{run_curate, ColourStatistic, CurateOptions, SsimScale};
+use pipeline::stages::curate::features::HistogramDescriptor;
+use pipeline::stages::curate::select::{roc_auc, Keep};
+use pipeline::stages::curate::{run_curate, ColourStatistic, CurateOptions, SsimScale};
 use pipeline::matcher::Matcher;
-use pipeline::teacher::{run_teacher, TeacherOptions};
+use pipeline::stages::teacher::{run_teacher, TeacherOptions};
 use pipeline::Silent;
 use raster::Image;
 
@@ -214,7 +214,7 @@ fn curate_ranks_consistent_pairs_first() {
         assert_eq!(&row.stem, stem, "rows in stem order");
         assert_eq!(row.status, "ok");
     }
-    let col = |f: &dyn Fn(&pipeline::curate::RankedPair) -> f64| -> Vec<f64> {
+    let col = |f: &dyn Fn(&pipeline::stages::curate::RankedPair) -> f64| -> Vec<f64> {
         ranking.rows.iter().map(f).collect()
     };
     let comb = col(&|r| r.s_comb.unwrap());

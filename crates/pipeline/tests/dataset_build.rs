@@ -9,11 +9,11 @@ use dataset::experiment::read_experiment_csv;
 use dataset::layout::{DatasetDir, MaskKind};
 use dataset::manifest::Manifest;
 use dataset::{load_sample, PairKind, PairStem, SampleIndex, Shard, Side, Subset};
-use pipeline::dataset_build::{run_build, BuildOptions, MaskDirs};
+use pipeline::stages::dataset_build::{run_build, BuildOptions, MaskDirs};
 use pipeline::matcher::Matcher;
-use pipeline::synthesize::{run_synthesize, SynthesizeOptions};
-use pipeline::teacher::{run_teacher, TeacherOptions};
-use pipeline::world_training::{
+use pipeline::stages::synthesize::{run_synthesize, SynthesizeOptions};
+use pipeline::stages::teacher::{run_teacher, TeacherOptions};
+use pipeline::stages::world_training::{
     build_world_training, world_ids, world_range, write_world_sources, WorldTrainingOptions,
 };
 use pipeline::Silent;

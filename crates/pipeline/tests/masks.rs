@@ -4,8 +4,8 @@
 use dataset::masks::{from_segmentation, MaskFile};
 use dataset::segmentation::MaskKind;
 use dataset::Shard;
-use pipeline::masks::offline::{class_iou, PixelClassifier, TRAINING_SEEDS};
-use pipeline::masks::{
+use pipeline::stages::masks::offline::{class_iou, PixelClassifier, TRAINING_SEEDS};
+use pipeline::stages::masks::{
     mask_path, prob_path, run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter,
 };
 use pipeline::Silent;
@@ -210,7 +210,7 @@ fn bad_inputs_are_explained() {
         &raster::Image::filled(4, 4, 3, 1.0),
     )
     .unwrap();
-    let err = format!("{:#}", pipeline::masks::list_images(&images).unwrap_err());
+    let err = format!("{:#}", pipeline::stages::masks::list_images(&images).unwrap_err());
     assert!(err.contains("same stem"), "{err}");
 }
 
@@ -218,7 +218,7 @@ fn bad_inputs_are_explained() {
 /// (what a perfect teacher would give): its classes remain a test on synthetic data.
 #[test]
 fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
-    use pipeline::masks::heights::{ground_level, ImageHeights};
+    use pipeline::stages::masks::heights::{ground_level, ImageHeights};
     let mut iou = [0.0f64; 3];
     for &seed in &TEST_SEEDS {
         let params = world::WorldParams::new(192, seed);
@@ -244,7 +244,7 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
             pairs: vec![],
         };
         let options = MaskKind::ALL.map(dataset::segmentation::MaskOptions::defaults);
-        let s = pipeline::masks::rules::segment(&w.left.image, Some(&heights), &options).unwrap();
+        let s = pipeline::stages::masks::rules::segment(&w.left.image, Some(&heights), &options).unwrap();
         for (k, (kind, id)) in [
             (MaskKind::Tree, class::TREE),
             (MaskKind::Building, class::BUILDING),

@@ -17,8 +17,8 @@ use super::plan::Tile;
 use super::raw::RawImage;
 use crate::dsm::valid_pixels;
 use crate::matcher::{Matcher, RangeSource};
-use crate::pairs::PairFolder;
-use crate::rectify::{right_coverage, RawInputs, RectifyRecord};
+use crate::pairs::{PairFolder, RectifyRecord};
+use crate::rectify::{right_coverage, RawInputs};
 use crate::stage::write_json;
 use crate::Silent;
 
