@@ -4,9 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use pipeline::matcher::{Matcher, RangeSource};
-use pipeline::predict::{read_pair, write_disparity};
-use pipeline::Progress;
+use seasonstereo::{predict, read_pair, write_disparity, Matched, Matcher, Progress, RangeSource};
 
 use crate::args::{parse_range, MatcherArgs};
 
@@ -47,30 +45,34 @@ pub struct PredictArgs {
 pub fn run(a: PredictArgs, progress: &dyn Progress) -> Result<()> {
     let matcher = a.matcher.matcher()?;
     let (left, right) = read_pair(&a.left, &a.right)?;
-    let matched = matcher.disparity(
-        &left,
-        &right,
-        RangeSource::flag_or_estimate(a.range),
-        progress,
-    )?;
-    let what = match (&matcher, matched.range) {
+    let range = RangeSource::flag_or_estimate(a.range);
+    let matched = predict(&left, &right, &matcher, range, progress)?;
+    for path in std::iter::once(&a.output).chain(&a.color) {
+        write_disparity(path, &matched.disparity)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let valid = matched
+        .disparity
+        .data()
+        .iter()
+        .filter(|v| v.is_finite())
+        .count();
+    println!(
+        "wrote {} ({}, {:.1} % of pixels matched)",
+        a.output.display(),
+        describe(&matcher, &matched),
+        100.0 * valid as f64 / matched.disparity.data().len().max(1) as f64
+    );
+    Ok(())
+}
+
+/// Which matcher ran and over which range, for the closing line.
+fn describe(matcher: &Matcher, matched: &Matched) -> String {
+    match (matcher, matched.range) {
         (Matcher::Network(n), _) => {
             format!("MonSter++ {}, {} iterations", n.options.preset, n.iters)
         }
         (_, Some((lo, hi))) => format!("{}, range {lo}..{hi} px", matcher.name()),
         (_, None) => matcher.name(),
-    };
-    let disparity = matched.disparity;
-    write_disparity(&a.output, &disparity)
-        .with_context(|| format!("writing {}", a.output.display()))?;
-    if let Some(c) = &a.color {
-        write_disparity(c, &disparity).with_context(|| format!("writing {}", c.display()))?;
     }
-    let valid = disparity.data().iter().filter(|v| v.is_finite()).count();
-    println!(
-        "wrote {} ({what}, {:.1} % of pixels matched)",
-        a.output.display(),
-        100.0 * valid as f64 / disparity.data().len().max(1) as f64
-    );
-    Ok(())
 }

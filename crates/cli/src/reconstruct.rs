@@ -4,9 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::Args;
-use pipeline::dsm::GridChoice;
-use pipeline::reconstruct::tile::TileStatus;
-use pipeline::reconstruct::{reconstruct, ReconstructOptions};
+use seasonstereo::{
+    reconstruct, DsmSummary, GridChoice, Progress, ReconstructOptions, ReconstructSummary,
+    TileStatus,
+};
 
 use crate::args::{parse_alt_range, parse_box, parse_roi, GriddingArg, MatcherArgs, ShardArg};
 
@@ -107,67 +108,10 @@ pub struct ReconstructArgs {
     matcher: MatcherArgs,
 }
 
-pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> {
-    if let (Some(t), Some(l)) = (&a.truth, &a.like) {
-        if t != l {
-            bail!(
-                "--truth {} must be the DSM given to --like (the scores need its grid)",
-                t.display()
-            );
-        }
-    }
-    let matcher = a.matcher.matcher()?;
-    let grid = match &a.like {
-        Some(p) => GridChoice::Like(p.clone()),
-        None => GridChoice::Resolution {
-            resolution: a.resolution,
-            bounds: None,
-            epsg: a.epsg,
-        },
-    };
-    let opts = ReconstructOptions {
-        left: a.left,
-        right: a.right,
-        rpc_left: a.rpc_left,
-        rpc_right: a.rpc_right,
-        roi: a.roi,
-        roi_lonlat: a.roi_lonlat,
-        alt_range: a.alt_range,
-        matcher,
-        output: a.output.clone(),
-        work_dir: a.work,
-        grid,
-        gridding: a.gridding.into(),
-        fill_holes: (a.fill_holes > 0).then_some(a.fill_holes),
-        median_filter: (a.median_filter > 1).then_some(a.median_filter),
-        border: 0,
-        truth: a.truth,
-        tile: a.tile,
-        collar: a.collar,
-        max_memory: gib_to_bytes(a.max_memory)?,
-        shard: a.shard.shard,
-        merge_only: a.merge,
-        keep_intermediates: a.keep_intermediates,
-    };
-    let s = reconstruct(&opts, progress)?;
-    let count = |st| s.count(st);
-    let range = s
-        .disparity_range()
-        .map_or("-".into(), |(lo, hi)| format!("{lo}:{hi} px"));
-    println!(
-        "tiles: {} of {} px (collar {} px): {} done, {} empty, {} failed; {} run now ({} at once, \
-         largest ~{:.2} GiB), disparity {range}, {:.1} % matched",
-        s.records.len() + s.missing.len(),
-        a.tile,
-        a.collar,
-        count(TileStatus::Done),
-        count(TileStatus::Empty),
-        count(TileStatus::Failed),
-        s.ran,
-        s.in_flight,
-        s.tile_memory as f64 / (1u64 << 30) as f64,
-        100.0 * s.matched().unwrap_or(0.0),
-    );
+pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
+    let (tile, collar, output) = (a.tile, a.collar, a.output.clone());
+    let s = reconstruct(&a.options()?, progress)?;
+    println!("{}", tiles_line(&s, tile, collar));
     for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
         eprintln!(
             "warning: tile {} failed (rerun the same command to retry it): {}",
@@ -184,16 +128,98 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         );
         return Ok(());
     };
+    println!("{}", dsm_line(&s, dsm, &output));
+    if let Some(sc) = &s.scores {
+        println!("vs truth: {}", crate::score::format_scores(sc));
+    }
+    Ok(())
+}
+
+impl ReconstructArgs {
+    /// The library's options for these flags.
+    fn options(self) -> Result<ReconstructOptions> {
+        self.check_truth()?;
+        let grid = match &self.like {
+            Some(p) => GridChoice::Like(p.clone()),
+            None => GridChoice::Resolution {
+                resolution: self.resolution,
+                bounds: None,
+                epsg: self.epsg,
+            },
+        };
+        Ok(ReconstructOptions {
+            matcher: self.matcher.matcher()?,
+            max_memory: gib_to_bytes(self.max_memory)?,
+            left: self.left,
+            right: self.right,
+            rpc_left: self.rpc_left,
+            rpc_right: self.rpc_right,
+            roi: self.roi,
+            roi_lonlat: self.roi_lonlat,
+            alt_range: self.alt_range,
+            output: self.output,
+            work_dir: self.work,
+            grid,
+            gridding: self.gridding.into(),
+            fill_holes: (self.fill_holes > 0).then_some(self.fill_holes),
+            median_filter: (self.median_filter > 1).then_some(self.median_filter),
+            border: 0,
+            truth: self.truth,
+            tile: self.tile,
+            collar: self.collar,
+            shard: self.shard.shard,
+            merge_only: self.merge,
+            keep_intermediates: self.keep_intermediates,
+        })
+    }
+}
+
+impl ReconstructArgs {
+    /// The scores need the truth's grid: `--truth` must be the `--like` DSM.
+    fn check_truth(&self) -> Result<()> {
+        if let (Some(t), Some(l)) = (&self.truth, &self.like) {
+            if t != l {
+                bail!(
+                    "--truth {} must be the DSM given to --like (the scores need its grid)",
+                    t.display()
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The tiles' line: how many of each status, how many ran and at once.
+fn tiles_line(s: &ReconstructSummary, tile: usize, collar: usize) -> String {
+    let range = s
+        .disparity_range()
+        .map_or("-".into(), |(lo, hi)| format!("{lo}:{hi} px"));
+    format!(
+        "tiles: {} of {tile} px (collar {collar} px): {} done, {} empty, {} failed; {} run now ({} \
+         at once, largest ~{:.2} GiB), disparity {range}, {:.1} % matched",
+        s.records.len() + s.missing.len(),
+        s.count(TileStatus::Done),
+        s.count(TileStatus::Empty),
+        s.count(TileStatus::Failed),
+        s.ran,
+        s.in_flight,
+        s.tile_memory as f64 / (1u64 << 30) as f64,
+        100.0 * s.matched().unwrap_or(0.0),
+    )
+}
+
+/// The DSM's line: its grid, coverage and the steps' times.
+fn dsm_line(s: &ReconstructSummary, dsm: &DsmSummary, output: &std::path::Path) -> String {
     let times: Vec<String> = s
         .seconds
         .iter()
         .map(|(k, t)| format!("{k} {t:.1} s"))
         .collect();
     let cells = (dsm.grid.width * dsm.grid.height) as f64;
-    println!(
+    format!(
         "wrote {} ({}x{} cells of {} m, EPSG:{}, {:.1} % measured, {:.1} % with a height) from \
          pair {}; {}",
-        a.output.display(),
+        output.display(),
         dsm.grid.width,
         dsm.grid.height,
         dsm.grid.resolution,
@@ -202,11 +228,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn pipeline::Progress) -> Result<()> 
         100.0 * dsm.filled_cells as f64 / cells,
         s.stem,
         times.join(", ")
-    );
-    if let Some(sc) = &s.scores {
-        println!("vs truth: {}", crate::score::format_scores(sc));
-    }
-    Ok(())
+    )
 }
 
 /// A positive number of GiB in bytes.

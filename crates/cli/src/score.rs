@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use pipeline::eval::metrics::DsmScores;
+use seasonstereo::{read_truth, score, DsmScores};
 
 /// One line with the benchmark's scores.
 pub fn format_scores(s: &DsmScores) -> String {
@@ -73,10 +73,10 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             })?
             .zone(),
     };
-    let truth = pipeline::score::read_truth(&a.truth, zone)?;
+    let truth = read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {
-        let s = pipeline::score::score_dsm_file(path, &truth)?;
+        let s = score(path, &truth)?;
         println!("{}: {}", path.display(), format_scores(&s));
         let mut v = serde_json::to_value(&s)?;
         v["dsm"] = serde_json::Value::String(path.display().to_string());

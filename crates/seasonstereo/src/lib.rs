@@ -1,0 +1,130 @@
+//! # seasonstereo
+//!
+//! Dense stereo matching of multi-date satellite imagery: a pair of satellite images, taken in
+//! the same pass or in different seasons, becomes a disparity map and a Digital Surface Model
+//! (DSM). This crate is the product's library API: the `seasonstereo` command line, the Python
+//! package and the cluster jobs all call these functions with these option structs, so what one
+//! of them can do, the others can.
+//!
+//! | step | function | options → result |
+//! |---|---|---|
+//! | raw pair → rectified pair | [`rectify`] | [`RectifyOptions`] → [`RectifySummary`] |
+//! | rectified pair → disparity | [`predict`] | [`Matcher`], [`RangeSource`] → [`Matched`] |
+//! | disparity → DSM | [`dsm`] | [`DsmOptions`] → [`DsmSummary`] |
+//! | raw pair → DSM, tiled, resumable | [`reconstruct`] | [`ReconstructOptions`] → [`ReconstructSummary`] |
+//! | DSM → benchmark scores | [`score`] | [`Truth`] → [`DsmScores`] |
+//! | disparities of a split → Table 1 | [`eval`] | [`EvalOptions`] → [`EvalReport`] |
+//! | the training set | [`stages`] | teacher → curate → synthesize → masks → dataset build |
+//!
+//! Conventions: pairs are rectified (epipolar lines are rows); disparity lives on the left view,
+//! `x_R = x_L − d`, positive and growing with altitude; invalid pixels are NaN. DSMs are float32
+//! Cloud-Optimized GeoTIFFs on a UTM grid, NaN where no point fell.
+//!
+//! Long calls report progress through a [`Progress`] (the CLI draws bars; [`Silent`] draws
+//! nothing). Errors are [`anyhow::Error`]s whose text names the file and the fix; the underlying
+//! [`std::io::Error`] (a missing file, a full disk) stays reachable with `downcast_ref`.
+//!
+//! ```no_run
+//! use seasonstereo::{reconstruct, GridChoice, Matcher, ReconstructOptions, SgmParams, Silent};
+//!
+//! let options = ReconstructOptions::new(
+//!     "left.tif".into(),
+//!     "right.tif".into(),
+//!     Matcher::Classical(SgmParams::default()),
+//!     GridChoice::Resolution { resolution: 0.5, bounds: None, epsg: None },
+//!     "dsm.tif".into(),
+//! );
+//! let summary = reconstruct(&options, &Silent)?;
+//! println!("{} of {} tiles done", summary.records.len(), summary.records.len() + summary.missing.len());
+//! # Ok::<(), anyhow::Error>(())
+//! ```
+//!
+//! The learned matcher (MonSter++) and segmenter (SegFormer) need the default feature `network`
+//! (burn); without it everything else builds and runs.
+#![deny(missing_docs)]
+
+use std::path::Path;
+
+pub use anyhow::{Error, Result};
+pub use camera::{DsmGrid, Gridding, RpcModel, UtmZone};
+pub use matching::SgmParams;
+pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
+pub use pipeline::eval::metrics::DsmScores;
+pub use pipeline::eval::{EvalOptions, EvalReport, Truth};
+#[cfg(feature = "network")]
+pub use pipeline::matcher::MonsterOptions;
+pub use pipeline::matcher::{Matched, Matcher, RangeSource};
+pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};
+pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary};
+pub use pipeline::rectify::{RectifyOptions, RectifySummary};
+pub use pipeline::{Progress, Silent};
+pub use raster::Image;
+
+pub mod stages;
+
+/// Rectifies a raw satellite pair from its RPC cameras (epipolar lines become rows) into the
+/// pair folder `options.out_dir` (`L/`, `R/`, `homography/`, `rectify/`), and gives the disparity
+/// search range that the scene's altitudes imply.
+pub fn rectify(options: &RectifyOptions, progress: &dyn Progress) -> Result<RectifySummary> {
+    pipeline::rectify::rectify(options, progress)
+}
+
+/// Reads a rectified pair (NPY `.iio`/`.npy`, TIFF, PNG, PFM), checking that both sides have the
+/// same size.
+pub fn read_pair(left: &Path, right: &Path) -> Result<(Image, Image)> {
+    pipeline::predict::read_pair(left, right)
+}
+
+/// The disparity of the rectified pair `left`, `right` (NaN where invalid), by `matcher`: census +
+/// MGM/SGM over the range `range` gives, or MonSter++ (which ignores the range).
+pub fn predict(
+    left: &Image,
+    right: &Image,
+    matcher: &Matcher,
+    range: RangeSource,
+    progress: &dyn Progress,
+) -> Result<Matched> {
+    matcher.disparity(left, right, range, progress)
+}
+
+/// Writes a disparity; the extension picks the format: `.iio`/`.npy`, `.tif`, `.pfm` keep the
+/// values (NaN = invalid), `.png` writes a colour-mapped picture.
+pub fn write_disparity(path: &Path, disparity: &Image) -> Result<()> {
+    pipeline::predict::write_disparity(path, disparity)
+}
+
+/// Turns the disparity of a rectified pair into a georeferenced DSM: RPC triangulation (s2p's
+/// iteration), points gridded per cell, optional hole filling and median filter.
+pub fn dsm(options: &DsmOptions) -> Result<DsmSummary> {
+    pipeline::dsm::disparity_to_dsm(options)
+}
+
+/// From a raw pair to a DSM at any scene size: tiles with collars, each rectified, matched,
+/// triangulated and gridded on its own within a memory budget, merged on one UTM grid, filled,
+/// filtered and written as a COG. Resumable and shardable through the work folder.
+pub fn reconstruct(
+    options: &ReconstructOptions,
+    progress: &dyn Progress,
+) -> Result<ReconstructSummary> {
+    pipeline::reconstruct::reconstruct(options, progress)
+}
+
+/// Reads a ground truth `<AOI>_DSM.tif` (GeoTIFF, or DFC2019 plain TIFF + `<AOI>_DSM.txt` in
+/// UTM `zone`) with its `<AOI>_CLS.tif` and optional `<AOI>_WATER.png` beside it.
+pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
+    pipeline::score::read_truth(dsm, zone)
+}
+
+/// The benchmark's metric on a DSM already on the truth's grid: the integer shift within ±5
+/// cells that maximises NCC, the vertical offset, MAE over the cells both have (raw, without
+/// water, without foliage and water) and the truth's coverage.
+pub fn score(dsm: &Path, truth: &Truth) -> Result<DsmScores> {
+    pipeline::score::score_dsm_file(dsm, truth)
+}
+
+/// Altitude MAE of the DSMs from the disparities of one or more splits, exactly as the
+/// benchmark's code computes it; resumable (pairs already in the CSV are skipped) and writing
+/// the paper's Table 1.
+pub fn eval(options: &EvalOptions, progress: &dyn Progress) -> Result<EvalReport> {
+    pipeline::eval::evaluate(options, progress)
+}
