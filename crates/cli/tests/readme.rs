@@ -1,4 +1,4 @@
-//! The README's command blocks run as written: every command of every ```sh block is listed in
+//! The README's command blocks run as written: every command of every `sh` block is listed in
 //! [`PLANS`], as run here or skipped with the reason, and the cheap ones run with the built
 //! binary on `PATH`, block after block in one folder (later blocks read what earlier ones wrote).
 //! A variable set to `../shared/<set>/…` points at that data set where the tests find it
@@ -99,7 +99,7 @@ const PLANS: &[(&str, Plan)] = &[
 /// The README's default data root, which the tests' own root replaces.
 const README_DATA_ROOT: &str = "../shared/";
 
-/// One ```sh block: its variable assignments and its commands, continuation lines joined.
+/// One `sh` block: its variable assignments and its commands, continuation lines joined.
 #[derive(Debug, Default)]
 struct Block {
     assignments: Vec<(String, String)>,
@@ -111,7 +111,7 @@ fn readme() -> String {
     std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// The ```sh blocks of `markdown`, in order.
+/// The `sh` blocks of `markdown`, in order.
 fn sh_blocks(markdown: &str) -> Vec<Block> {
     let mut blocks = Vec::new();
     let mut current: Option<Vec<&str>> = None;
