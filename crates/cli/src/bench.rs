@@ -72,106 +72,177 @@ pub fn run(a: BenchArgs) -> Result<()> {
         anyhow::bail!("--runs must be at least 1");
     }
     let device = a.device.device.device().map_err(|e| anyhow!(e))?;
-    let (preset, h, w, iters, batch) = match a.workload {
-        BenchWorkload::Monsterpp => ("vits", 256, 512, 12, 1),
-        BenchWorkload::Segformer => ("mit-b2", 1000, 1000, 0, 1),
-        BenchWorkload::Dinov3 => ("vits16", 224, 224, 0, 2),
-        BenchWorkload::TrainStep => ("tiny", 64, 128, 7, 1),
-    };
-    let preset = a.preset.clone().unwrap_or_else(|| preset.to_string());
-    let h = a.height.unwrap_or(h);
-    let w = a.width.unwrap_or(if a.height.is_some() && iters == 0 {
-        h
-    } else {
-        w
-    });
-    let iters = a.iters.unwrap_or(iters);
-    let batch = a.batch.unwrap_or(batch);
-    let mut work = match a.workload {
-        BenchWorkload::Monsterpp => nn::bench::monster(&preset, h, w, iters, a.max_disp, &device),
-        BenchWorkload::Segformer => nn::bench::segformer(&preset, h, &device),
-        BenchWorkload::Dinov3 => nn::bench::dinov3(&preset, h, batch, &device),
-        BenchWorkload::TrainStep => {
-            train::bench::step_config(&preset, h, w, batch, iters, a.max_disp)
-                .and_then(|c| train::bench::train_step(&c, &device))
-        }
-    }
-    .map_err(|e| anyhow!("{e}"))?;
-    let timed = |work: &mut nn::bench::Workload| -> Result<f64> {
-        let t = Instant::now();
-        work().map_err(|e| anyhow!("{e}"))?;
-        Ok(t.elapsed().as_secs_f64())
-    };
+    let shape = BenchShape::of(&a);
+    let mut work = shape.workload(&a, &device)?;
     let warmup = timed(&mut work)?;
     let times = (0..a.runs)
         .map(|_| timed(&mut work))
         .collect::<Result<Vec<f64>>>()?;
     let profile = if a.profile {
-        let recording = nn::profile::Recording::start(&device)
-            .ok_or_else(|| anyhow!("another profile is already recording"))?;
-        let total = timed(&mut work)?;
-        Some((total, recording.finish()))
+        Some(profiled(&mut work, &device)?)
     } else {
         None
     };
-    let median = pipeline::eval::aggregate::median(&times).expect("at least one run");
-    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
-    let peak = train::metrics::peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64);
-    let name = a
-        .workload
-        .to_possible_value()
-        .map_or_else(String::new, |v| v.get_name().to_string());
-    let shape = match a.workload {
-        BenchWorkload::Segformer => format!("{h}x{h}"),
-        BenchWorkload::Dinov3 => format!("{batch}x{h}x{h}"),
-        _ => format!("{h}x{w}"),
+    let timing = Timing {
+        median: pipeline::eval::aggregate::median(&times).expect("at least one run"),
+        min: times.iter().copied().fold(f64::INFINITY, f64::min),
+        peak_mib: train::metrics::peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64),
+        warmup,
+        times,
     };
-    let profile = profile.map(|(total, mut groups)| {
-        let covered: f64 = groups.iter().map(|g| g.seconds).sum();
-        groups.push(nn::profile::GroupTime {
-            group: "other",
-            seconds: (total - covered).max(0.0),
-            calls: 0,
-        });
-        (total, groups)
-    });
     if a.json {
-        let mut v = serde_json::json!({
-            "workload": name, "config": preset, "shape": shape, "iters": iters,
-            "max_disp": a.max_disp, "batch": batch, "device": a.device.device.name(),
-            "threads": std::thread::available_parallelism().map_or(1, |n| n.get()), "runs": a.runs, "warmup_s": warmup,
-            "median_s": median, "min_s": min, "times_s": times, "peak_rss_mib": peak,
-        });
-        if let Some((total, groups)) = &profile {
-            v["profile"] = serde_json::json!({ "total_s": total, "groups": groups });
-        }
-        println!("{v}");
+        println!("{}", json_line(&a, &shape, &timing, profile.as_ref()));
     } else {
-        println!(
-            "{name} {preset} {shape}{} on {} ({} threads): median {median:.3} s, min {min:.3} s \
-             over {} runs (warm-up {warmup:.3} s), peak RSS {}",
-            if iters > 0 {
-                format!(", {iters} iterations")
-            } else {
-                String::new()
-            },
-            a.device.device,
-            std::thread::available_parallelism().map_or(1, |n| n.get()),
-            a.runs,
-            peak.map_or("n/a".into(), |m| format!("{m:.0} MiB"))
-        );
-        if let Some((total, groups)) = &profile {
-            println!("profiled run {total:.3} s:");
-            for g in groups {
-                println!(
-                    "  {:40} {:8.3} s {:5.1} %  ({} calls)",
-                    g.group,
-                    g.seconds,
-                    100.0 * g.seconds / total,
-                    g.calls
-                );
-            }
-        }
+        print_sentence(&a, &shape, &timing, profile.as_ref());
     }
     Ok(())
+}
+
+/// The workload's preset and sizes: the flags, else the workload's defaults.
+struct BenchShape {
+    preset: String,
+    height: usize,
+    width: usize,
+    iters: usize,
+    batch: usize,
+}
+
+impl BenchShape {
+    fn of(a: &BenchArgs) -> Self {
+        let (preset, h, w, iters, batch) = match a.workload {
+            BenchWorkload::Monsterpp => ("vits", 256, 512, 12, 1),
+            BenchWorkload::Segformer => ("mit-b2", 1000, 1000, 0, 1),
+            BenchWorkload::Dinov3 => ("vits16", 224, 224, 0, 2),
+            BenchWorkload::TrainStep => ("tiny", 64, 128, 7, 1),
+        };
+        let height = a.height.unwrap_or(h);
+        // The square networks take --height alone as their side.
+        let square = a.height.is_some() && iters == 0;
+        BenchShape {
+            preset: a.preset.clone().unwrap_or_else(|| preset.to_string()),
+            height,
+            width: a.width.unwrap_or(if square { height } else { w }),
+            iters: a.iters.unwrap_or(iters),
+            batch: a.batch.unwrap_or(batch),
+        }
+    }
+
+    /// The pass to time, with random weights on `device`.
+    fn workload(&self, a: &BenchArgs, device: &nn::device::Device) -> Result<nn::bench::Workload> {
+        let (p, h, w) = (self.preset.as_str(), self.height, self.width);
+        match a.workload {
+            BenchWorkload::Monsterpp => nn::bench::monster(p, h, w, self.iters, a.max_disp, device),
+            BenchWorkload::Segformer => nn::bench::segformer(p, h, device),
+            BenchWorkload::Dinov3 => nn::bench::dinov3(p, h, self.batch, device),
+            BenchWorkload::TrainStep => {
+                train::bench::step_config(p, h, w, self.batch, self.iters, a.max_disp)
+                    .and_then(|c| train::bench::train_step(&c, device))
+            }
+        }
+        .map_err(|e| anyhow!("{e}"))
+    }
+
+    /// `HxW`, the square side twice, or the DINOv3 batch of squares.
+    fn label(&self, workload: BenchWorkload) -> String {
+        let (b, h, w) = (self.batch, self.height, self.width);
+        match workload {
+            BenchWorkload::Segformer => format!("{h}x{h}"),
+            BenchWorkload::Dinov3 => format!("{b}x{h}x{h}"),
+            _ => format!("{h}x{w}"),
+        }
+    }
+}
+
+/// What the timed runs measured, seconds and MiB.
+struct Timing {
+    warmup: f64,
+    times: Vec<f64>,
+    median: f64,
+    min: f64,
+    peak_mib: Option<f64>,
+}
+
+/// A profiled run's total time and its module groups, the rest as "other".
+type Profile = (f64, Vec<nn::profile::GroupTime>);
+
+/// Seconds of one run of `work`.
+fn timed(work: &mut nn::bench::Workload) -> Result<f64> {
+    let t = Instant::now();
+    work().map_err(|e| anyhow!("{e}"))?;
+    Ok(t.elapsed().as_secs_f64())
+}
+
+/// One more run with the time of every module group.
+fn profiled(work: &mut nn::bench::Workload, device: &nn::device::Device) -> Result<Profile> {
+    let recording = nn::profile::Recording::start(device)
+        .ok_or_else(|| anyhow!("another profile is already recording"))?;
+    let total = timed(work)?;
+    let mut groups = recording.finish();
+    let covered: f64 = groups.iter().map(|g| g.seconds).sum();
+    groups.push(nn::profile::GroupTime {
+        group: "other",
+        seconds: (total - covered).max(0.0),
+        calls: 0,
+    });
+    Ok((total, groups))
+}
+
+/// The workload's name as typed on the command line.
+fn workload_name(w: BenchWorkload) -> String {
+    w.to_possible_value()
+        .map_or_else(String::new, |v| v.get_name().to_string())
+}
+
+fn threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// `--json`: one line with every figure.
+fn json_line(a: &BenchArgs, s: &BenchShape, t: &Timing, profile: Option<&Profile>) -> String {
+    let mut v = serde_json::json!({
+        "workload": workload_name(a.workload), "config": s.preset, "shape": s.label(a.workload),
+        "iters": s.iters, "max_disp": a.max_disp, "batch": s.batch,
+        "device": a.device.device.name(), "threads": threads(), "runs": a.runs,
+        "warmup_s": t.warmup, "median_s": t.median, "min_s": t.min, "times_s": t.times,
+        "peak_rss_mib": t.peak_mib,
+    });
+    if let Some((total, groups)) = profile {
+        v["profile"] = serde_json::json!({ "total_s": total, "groups": groups });
+    }
+    v.to_string()
+}
+
+/// The sentence, and the profile's table when there is one.
+fn print_sentence(a: &BenchArgs, s: &BenchShape, t: &Timing, profile: Option<&Profile>) {
+    let iters = if s.iters > 0 {
+        format!(", {} iterations", s.iters)
+    } else {
+        String::new()
+    };
+    println!(
+        "{} {} {}{iters} on {} ({} threads): median {:.3} s, min {:.3} s over {} runs (warm-up \
+         {:.3} s), peak RSS {}",
+        workload_name(a.workload),
+        s.preset,
+        s.label(a.workload),
+        a.device.device,
+        threads(),
+        t.median,
+        t.min,
+        a.runs,
+        t.warmup,
+        t.peak_mib.map_or("n/a".into(), |m| format!("{m:.0} MiB"))
+    );
+    if let Some((total, groups)) = profile {
+        println!("profiled run {total:.3} s:");
+        for g in groups {
+            println!(
+                "  {:40} {:8.3} s {:5.1} %  ({} calls)",
+                g.group,
+                g.seconds,
+                100.0 * g.seconds / total,
+                g.calls
+            );
+        }
+    }
 }

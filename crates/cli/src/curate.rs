@@ -81,31 +81,7 @@ pub struct CurateArgs {
 }
 
 pub fn run(a: CurateArgs, progress: &dyn Progress) -> Result<()> {
-    let features: Box<dyn features::FeatureSimilarity> = match &a.dinov3 {
-        Some(w) => Box::new(features::Dinov3Similarity::load(
-            w,
-            a.dinov3_config.as_deref(),
-            &a.dinov3_normalisation,
-            a.device.device,
-        )?),
-        None => Box::new(features::HistogramDescriptor),
-    };
-    let opts = CurateOptions {
-        pairs_dir: a.pairs,
-        teacher_dir: a.teacher,
-        out_dir: a.output,
-        keep: a.keep,
-        colour: match a.colour_distance {
-            ColourArg::Mean => ColourStatistic::Mean,
-            ColourArg::Release => ColourStatistic::ReleaseMeanP95,
-        },
-        ssim_scale: match a.ssim_scale {
-            SsimArg::Clamp => SsimScale::Clamp,
-            SsimArg::Affine => SsimScale::Affine,
-        },
-        shard: a.shard.shard,
-        features,
-    };
+    let opts = a.options()?;
     println!("S_feat: {}", opts.features.name());
     let s = curate::run_curate(&opts, progress)?;
     report("curate scoring", &s.scoring);
@@ -126,4 +102,35 @@ pub fn run(a: CurateArgs, progress: &dyn Progress) -> Result<()> {
         ),
     }
     Ok(())
+}
+
+impl CurateArgs {
+    /// The stage's options for these flags (the DINOv3 weights loaded when given).
+    fn options(self) -> Result<CurateOptions> {
+        let features: Box<dyn features::FeatureSimilarity> = match &self.dinov3 {
+            Some(w) => Box::new(features::Dinov3Similarity::load(
+                w,
+                self.dinov3_config.as_deref(),
+                &self.dinov3_normalisation,
+                self.device.device,
+            )?),
+            None => Box::new(features::HistogramDescriptor),
+        };
+        Ok(CurateOptions {
+            pairs_dir: self.pairs,
+            teacher_dir: self.teacher,
+            out_dir: self.output,
+            keep: self.keep,
+            colour: match self.colour_distance {
+                ColourArg::Mean => ColourStatistic::Mean,
+                ColourArg::Release => ColourStatistic::ReleaseMeanP95,
+            },
+            ssim_scale: match self.ssim_scale {
+                SsimArg::Clamp => SsimScale::Clamp,
+                SsimArg::Affine => SsimScale::Affine,
+            },
+            shard: self.shard.shard,
+            features,
+        })
+    }
 }

@@ -6,7 +6,9 @@ use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use dataset::Subset;
 use pipeline::stages::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
-use pipeline::stages::world_training::{build_world_training, WorldTrainingOptions};
+use pipeline::stages::world_training::{
+    build_world_training, WorldTrainingOptions, WorldTrainingSummary,
+};
 use pipeline::Progress;
 
 use crate::args::{SgmArgs, ShardArg};
@@ -162,55 +164,75 @@ fn print_build(split: &str, s: &BuildSummary, out: &std::path::Path) {
 pub fn run(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
     match a.command {
         DatasetCommand::Build(b) => {
-            let mut opts = BuildOptions::new(&b.pairs, &b.teacher, &b.output);
-            opts.selected = b.selected;
-            opts.synthetic_dir = b.synthetic;
-            if let Some(m) = &b.masks {
-                if !m.is_dir() {
-                    bail!("--masks {}: no such folder", m.display());
-                }
-                opts.masks = MaskDirs::release(m);
-            }
-            opts.segmenter = match (b.segmenter, &b.masks) {
-                (Some(s), _) => s,
-                (None, Some(m)) => MaskDirs::recorded_segmenter(m)
-                    .unwrap_or_else(|| format!("masks from {}", m.display())),
-                (None, None) => "none (release defaults)".into(),
-            };
-            opts.teacher_name = b.teacher_name;
-            opts.lidar_dir = b.lidar;
-            opts.split = b.split.clone();
-            opts.seed = b.seed;
-            opts.previews = b.preview;
-            opts.shard = b.shard.shard;
-            let s = run_build(&opts, progress)?;
+            let s = run_build(&b.options()?, progress)?;
             print_build(&b.split, &s, &b.output);
         }
         DatasetCommand::World(w) => {
-            let mut opts = WorldTrainingOptions::new(&w.output, w.size, w.worlds, w.val_worlds);
-            opts.seed = w.seed;
-            opts.generator_seed = w.generator_seed;
-            opts.subset_seed = w.subset_seed;
-            opts.previews = w.preview;
-            opts.sgm = w.sgm.params(matching::Aggregation::Mgm)?;
-            let s = build_world_training(&opts, progress)?;
-            println!(
-                "{} training and {} validation worlds of {}² px (disparity range {}..{} px); variants rejected: {} (train), {} (val)",
-                s.train.worlds, s.val.worlds, w.size, s.range.0, s.range.1,
-                s.train.synthesize.rejected, s.val.synthesize.rejected
-            );
-            print_build("train", &s.train.build, &w.output);
-            if s.val.worlds > 0 {
-                print_build("val", &s.val.build, &w.output);
-            }
-            println!(
-                "train with: experiments/{}.csv (S1), {}.csv (S2), {}.csv (S3), {}.csv (all)",
-                Subset::S1.csv_name(),
-                Subset::S2.csv_name(),
-                Subset::S3.csv_name(),
-                Subset::All.csv_name()
-            );
+            let s = build_world_training(&w.options()?, progress)?;
+            print_world(&w, &s);
         }
     }
     Ok(())
+}
+
+impl BuildArgs {
+    /// The build's options for these flags.
+    fn options(&self) -> Result<BuildOptions> {
+        let mut opts = BuildOptions::new(&self.pairs, &self.teacher, &self.output);
+        opts.selected = self.selected.clone();
+        opts.synthetic_dir = self.synthetic.clone();
+        if let Some(m) = &self.masks {
+            if !m.is_dir() {
+                bail!("--masks {}: no such folder", m.display());
+            }
+            opts.masks = MaskDirs::release(m);
+        }
+        opts.segmenter = match (&self.segmenter, &self.masks) {
+            (Some(s), _) => s.clone(),
+            (None, Some(m)) => MaskDirs::recorded_segmenter(m)
+                .unwrap_or_else(|| format!("masks from {}", m.display())),
+            (None, None) => "none (release defaults)".into(),
+        };
+        opts.teacher_name = self.teacher_name.clone();
+        opts.lidar_dir = self.lidar.clone();
+        opts.split = self.split.clone();
+        opts.seed = self.seed;
+        opts.previews = self.preview;
+        opts.shard = self.shard.shard;
+        Ok(opts)
+    }
+}
+
+impl WorldArgs {
+    /// The world training set's options for these flags.
+    fn options(&self) -> Result<WorldTrainingOptions> {
+        let mut opts =
+            WorldTrainingOptions::new(&self.output, self.size, self.worlds, self.val_worlds);
+        opts.seed = self.seed;
+        opts.generator_seed = self.generator_seed;
+        opts.subset_seed = self.subset_seed;
+        opts.previews = self.preview;
+        opts.sgm = self.sgm.params(matching::Aggregation::Mgm)?;
+        Ok(opts)
+    }
+}
+
+/// What `dataset world` made and how to train on it.
+fn print_world(w: &WorldArgs, s: &WorldTrainingSummary) {
+    println!(
+        "{} training and {} validation worlds of {}² px (disparity range {}..{} px); variants rejected: {} (train), {} (val)",
+        s.train.worlds, s.val.worlds, w.size, s.range.0, s.range.1,
+        s.train.synthesize.rejected, s.val.synthesize.rejected
+    );
+    print_build("train", &s.train.build, &w.output);
+    if s.val.worlds > 0 {
+        print_build("val", &s.val.build, &w.output);
+    }
+    println!(
+        "train with: experiments/{}.csv (S1), {}.csv (S2), {}.csv (S3), {}.csv (all)",
+        Subset::S1.csv_name(),
+        Subset::S2.csv_name(),
+        Subset::S3.csv_name(),
+        Subset::All.csv_name()
+    );
 }

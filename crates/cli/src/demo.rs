@@ -82,22 +82,7 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
 }
 
 fn run_ablation_command(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
-    let mut opts = AblationOptions::new(a.output.unwrap_or_else(|| "out/demo-ablation".into()));
-    opts.seed = a.seed;
-    opts.sgm = a.sgm.params(matching::Aggregation::Mgm)?;
-    if let Some(n) = a.size {
-        opts.size = n;
-    }
-    if let Some(n) = a.steps {
-        opts.steps = n;
-    }
-    if let Some(n) = a.train_worlds {
-        opts.train_worlds = n;
-    }
-    if let Some(n) = a.heldout_worlds {
-        opts.heldout_worlds = n;
-    }
-    let s = run_ablation(&opts, progress)?;
+    let s = run_ablation(&ablation_options(a)?, progress)?;
     for run in &s.runs {
         let c = &run.samples;
         let (first, last) = (run.validations.first(), run.validations.last());
@@ -121,4 +106,24 @@ fn run_ablation_command(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
     let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
     println!("report: {} ({total:.1} s)", s.report.display());
     Ok(())
+}
+
+/// The ablation's options: its defaults, with the flags given.
+fn ablation_options(a: DemoArgs) -> Result<AblationOptions> {
+    let mut opts = AblationOptions::new(a.output.unwrap_or_else(|| "out/demo-ablation".into()));
+    opts.seed = a.seed;
+    opts.sgm = a.sgm.params(matching::Aggregation::Mgm)?;
+    if let Some(n) = a.size {
+        opts.size = n;
+    }
+    if let Some(n) = a.steps {
+        opts.steps = n;
+    }
+    if let Some(n) = a.train_worlds {
+        opts.train_worlds = n;
+    }
+    if let Some(n) = a.heldout_worlds {
+        opts.heldout_worlds = n;
+    }
+    Ok(opts)
 }

@@ -103,39 +103,7 @@ impl EvalMethod {
 }
 
 pub fn run(a: EvalArgs, progress: &dyn Progress) -> Result<()> {
-    let method = match (&a.predictions, a.net.network()?, a.method.aggregation()) {
-        (Some(dir), _, _) => Method::Predictions(dir.clone()),
-        (None, Some(network), _) => Method::Matcher(network),
-        (None, None, Some(aggregation)) => {
-            Method::Matcher(Matcher::Classical(a.sgm.params(aggregation)?))
-        }
-        (None, None, None) => Method::GroundTruth,
-    };
-    let mut opts = match &a.world {
-        Some(dir) => EvalOptions::world(dir, "World", method, &a.output),
-        None => EvalOptions::new(
-            a.splits,
-            a.rpc_dir.context("--rpc-dir is required")?,
-            a.truth_dir.context("--truth-dir is required")?,
-            method,
-            &a.output,
-        ),
-    };
-    match a.name {
-        Some(n) => opts.method_name = n,
-        None if a.protocol != pipeline::eval::Protocol::Release => {
-            opts.method_name = format!("{} [{}]", opts.method_name, a.protocol.name());
-        }
-        None => {}
-    }
-    opts.protocol = a.protocol;
-    opts.save_dsm = a.save_dsm;
-    opts.max_pairs = a.max_pairs;
-    opts.aoi_rule = a
-        .aoi
-        .map_or(AoiRule::Fields(a.aoi_fields as usize), AoiRule::Fixed);
-    opts.crop = a.crop;
-    opts.omaha_max_disparity = a.omaha_max_disparity;
+    let opts = a.options()?;
     let r = evaluate(&opts, progress)?;
     println!("{}", r.table.to_text());
     println!(
@@ -143,4 +111,55 @@ pub fn run(a: EvalArgs, progress: &dyn Progress) -> Result<()> {
         r.scored, r.skipped, r.dropped, opts.omaha_max_disparity, r.csv.display(), r.markdown.display()
     );
     Ok(())
+}
+
+impl EvalArgs {
+    /// Where the disparities come from: a folder of predictions, a matcher, or the truth.
+    fn method(&self) -> Result<Method> {
+        Ok(
+            match (
+                &self.predictions,
+                self.net.network()?,
+                self.method.aggregation(),
+            ) {
+                (Some(dir), _, _) => Method::Predictions(dir.clone()),
+                (None, Some(network), _) => Method::Matcher(network),
+                (None, None, Some(aggregation)) => {
+                    Method::Matcher(Matcher::Classical(self.sgm.params(aggregation)?))
+                }
+                (None, None, None) => Method::GroundTruth,
+            },
+        )
+    }
+
+    /// The evaluation's options for these flags.
+    fn options(self) -> Result<EvalOptions> {
+        let method = self.method()?;
+        let mut opts = match &self.world {
+            Some(dir) => EvalOptions::world(dir, "World", method, &self.output),
+            None => EvalOptions::new(
+                self.splits,
+                self.rpc_dir.context("--rpc-dir is required")?,
+                self.truth_dir.context("--truth-dir is required")?,
+                method,
+                &self.output,
+            ),
+        };
+        match self.name {
+            Some(n) => opts.method_name = n,
+            None if self.protocol != pipeline::eval::Protocol::Release => {
+                opts.method_name = format!("{} [{}]", opts.method_name, self.protocol.name());
+            }
+            None => {}
+        }
+        opts.protocol = self.protocol;
+        opts.save_dsm = self.save_dsm;
+        opts.max_pairs = self.max_pairs;
+        opts.aoi_rule = self
+            .aoi
+            .map_or(AoiRule::Fields(self.aoi_fields as usize), AoiRule::Fixed);
+        opts.crop = self.crop;
+        opts.omaha_max_disparity = self.omaha_max_disparity;
+        Ok(opts)
+    }
 }

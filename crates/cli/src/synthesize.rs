@@ -100,35 +100,9 @@ pub struct SynthesizeArgs {
 
 /// Runs `seasonstereo synthesize`.
 pub fn run(a: SynthesizeArgs, progress: &dyn Progress) -> Result<()> {
-    let mut opts = SynthesizeOptions::new(&a.pairs, &a.raw, &a.output);
-    opts.selected = a.selected;
-    opts.classes_dir = a.classes;
-    opts.crop = a.crop;
-    opts.seasons = a.seasons;
-    opts.shard = a.shard.shard;
-    opts.fidelity.max_shift_px = a.max_shift;
-    opts.fidelity.min_edge_score = a.min_edge_score;
-    let generator: Box<dyn SeasonGenerator> = match a.generator {
-        GeneratorKind::Builtin => Box::new(BuiltinSeasons::new(a.seed)),
-        GeneratorKind::Gemini => {
-            let prompts = match &a.prompts {
-                Some(p) => Prompts::load(p)?,
-                None => Prompts::default(),
-            };
-            let config = GeminiConfig {
-                base_url: a.api_url,
-                model: a.model,
-                api_key_env: a.api_key_env,
-                prompts,
-                max_concurrent: a.max_concurrent.max(1),
-                cache_dir: Some(a.cache.unwrap_or_else(|| a.output.join("api-cache"))),
-                ..GeminiConfig::default()
-            };
-            Box::new(GeminiGenerator::new(config)?)
-        }
-    };
+    let generator = a.generator()?;
     eprintln!("generator: {}", generator.name());
-    let s = run_synthesize(&opts, generator.as_ref(), progress)?;
+    let s = run_synthesize(&a.options(), generator.as_ref(), progress)?;
     let i = &s.images;
     println!(
         "images: {} processed, {} already done (skipped), {} in this shard of {}; variants: {} accepted, {} rejected by the fidelity check (see {})",
@@ -141,4 +115,46 @@ pub fn run(a: SynthesizeArgs, progress: &dyn Progress) -> Result<()> {
         a.output.join("rejected.csv").display()
     );
     Ok(())
+}
+
+impl SynthesizeArgs {
+    /// The stage's options for these flags.
+    fn options(&self) -> SynthesizeOptions {
+        let mut opts = SynthesizeOptions::new(&self.pairs, &self.raw, &self.output);
+        opts.selected = self.selected.clone();
+        opts.classes_dir = self.classes.clone();
+        opts.crop = self.crop;
+        opts.seasons = self.seasons.clone();
+        opts.shard = self.shard.shard;
+        opts.fidelity.max_shift_px = self.max_shift;
+        opts.fidelity.min_edge_score = self.min_edge_score;
+        opts
+    }
+
+    /// The season generator: the built-in model, or the generative API with its prompts.
+    fn generator(&self) -> Result<Box<dyn SeasonGenerator>> {
+        Ok(match self.generator {
+            GeneratorKind::Builtin => Box::new(BuiltinSeasons::new(self.seed)),
+            GeneratorKind::Gemini => {
+                let prompts = match &self.prompts {
+                    Some(p) => Prompts::load(p)?,
+                    None => Prompts::default(),
+                };
+                let config = GeminiConfig {
+                    base_url: self.api_url.clone(),
+                    model: self.model.clone(),
+                    api_key_env: self.api_key_env.clone(),
+                    prompts,
+                    max_concurrent: self.max_concurrent.max(1),
+                    cache_dir: Some(
+                        self.cache
+                            .clone()
+                            .unwrap_or_else(|| self.output.join("api-cache")),
+                    ),
+                    ..GeminiConfig::default()
+                };
+                Box::new(GeminiGenerator::new(config)?)
+            }
+        })
+    }
 }

@@ -55,27 +55,7 @@ fn toml_string(s: &str) -> String {
 }
 
 pub fn run(a: TrainArgs) -> Result<()> {
-    let mut overrides = a.set.clone();
-    if let Some(d) = &a.data {
-        overrides.push(format!("data.root={}", path_value(d)));
-    }
-    if let Some(i) = &a.init {
-        overrides.push(format!("model.init={}", path_value(i)));
-    }
-    if let Some(o) = &a.output {
-        overrides.push(format!("run.output={}", path_value(o)));
-    }
-    if let Some(s) = a.steps {
-        overrides.push(format!("run.steps={s}"));
-    }
-    let config = match (&a.resume, &a.config) {
-        (Some(r), None) => train::trainer::resume_config(r, &overrides)?,
-        (_, Some(c)) => TrainConfig::load(c, &overrides)?,
-        (None, None) => anyhow::bail!(
-            "give --config PRESET|FILE (presets: {}) or --resume RUN_DIR",
-            train::config::PRESETS.join(", ")
-        ),
-    };
+    let config = a.config()?;
     if a.print_config {
         print!("{}", config.to_toml());
         return Ok(());
@@ -90,23 +70,66 @@ pub fn run(a: TrainArgs) -> Result<()> {
     let summary = train::train(&config, &options, &mut bar)
         .with_context(|| format!("training run {:?}", config.name))?;
     bar.finish();
-    let loss = |v: Option<f32>| v.map_or("-".into(), |v| format!("{v:.4}"));
+    print_summary(&summary);
     println!(
-        "{} {} of {} steps: loss {} → {}, {:.3} it/s{}",
-        if summary.interrupted {
-            "stopped after"
-        } else {
-            "done:"
-        },
+        "logs: {}, {}",
+        config.run.output.join("metrics.csv").display(),
+        config.run.output.join("validation.csv").display()
+    );
+    Ok(())
+}
+
+impl TrainArgs {
+    /// The `key=value` overrides the flags stand for, after the `--set` ones.
+    fn overrides(&self) -> Vec<String> {
+        let mut overrides = self.set.clone();
+        if let Some(d) = &self.data {
+            overrides.push(format!("data.root={}", path_value(d)));
+        }
+        if let Some(i) = &self.init {
+            overrides.push(format!("model.init={}", path_value(i)));
+        }
+        if let Some(o) = &self.output {
+            overrides.push(format!("run.output={}", path_value(o)));
+        }
+        if let Some(s) = self.steps {
+            overrides.push(format!("run.steps={s}"));
+        }
+        overrides
+    }
+
+    /// The run's configuration: a resumed run's own, or the preset/file with the overrides.
+    fn config(&self) -> Result<TrainConfig> {
+        let overrides = self.overrides();
+        match (&self.resume, &self.config) {
+            (Some(r), None) => Ok(train::trainer::resume_config(r, &overrides)?),
+            (_, Some(c)) => Ok(TrainConfig::load(c, &overrides)?),
+            (None, None) => anyhow::bail!(
+                "give --config PRESET|FILE (presets: {}) or --resume RUN_DIR",
+                train::config::PRESETS.join(", ")
+            ),
+        }
+    }
+}
+
+/// The closing lines: steps and loss, validation, checkpoint.
+fn print_summary(summary: &train::trainer::TrainSummary) {
+    let loss = |v: Option<f32>| v.map_or("-".into(), |v| format!("{v:.4}"));
+    let done = if summary.interrupted {
+        "stopped after"
+    } else {
+        "done:"
+    };
+    let memory = summary.peak_rss_bytes.map_or(String::new(), |b| {
+        format!(", peak memory {:.0} MiB", b as f64 / 1048576.0)
+    });
+    println!(
+        "{done} {} of {} steps: loss {} → {}, {:.3} it/s{memory}",
         summary.steps_done,
         summary.total_steps,
         loss(summary.first_loss),
         loss(summary.last_loss),
         summary.its_per_s,
-        summary.peak_rss_bytes.map_or(String::new(), |b| format!(
-            ", peak memory {:.0} MiB",
-            b as f64 / 1048576.0
-        ))
     );
     if let (Some(f), Some(l)) = (summary.first_validation, summary.last_validation) {
         println!(
@@ -129,12 +152,6 @@ pub fn run(a: TrainArgs) -> Result<()> {
     if let Some(c) = &summary.checkpoint {
         println!("checkpoint: {}", c.display());
     }
-    println!(
-        "logs: {}, {}",
-        config.run.output.join("metrics.csv").display(),
-        config.run.output.join("validation.csv").display()
-    );
-    Ok(())
 }
 
 /// The progress bar: step, loss terms, learning rate and it/s.

@@ -4,7 +4,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-use burn::tensor::Device;
+pub use burn::tensor::Device;
 
 /// The backend a network runs on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
