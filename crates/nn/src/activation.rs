@@ -20,7 +20,7 @@ use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, Tensor
 use burn::tensor::{activation, DType, Tensor};
 use rayon::prelude::*;
 
-use crate::conv::on_cpu_training;
+use crate::cpu_mode::on_cpu_training;
 use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::fastmath;
 use crate::flex_tensor::{tensor, updated, values, ELEMENTWISE_CHUNK};

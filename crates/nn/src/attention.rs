@@ -9,8 +9,9 @@ use burn::tensor::activation::{gelu, softmax};
 use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference};
+use crate::cpu_mode::on_cpu_inference;
 use crate::fastmath;
+use crate::flex_tensor::f32_vec;
 use crate::matmul::{gemm_f32, SharedOut, Strided};
 
 /// Self-attention of `qkv` (`[b, n, 3e]`: q, k, v, each `heads × e/heads`, as PyTorch's

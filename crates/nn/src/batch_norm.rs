@@ -18,8 +18,9 @@ use burn::nn::BatchNorm;
 use burn::tensor::{DType, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_training};
+use crate::cpu_mode::on_cpu_training;
 use crate::custom_op::{register, step_inputs, RecordOp};
+use crate::flex_tensor::f32_vec;
 use crate::flex_tensor::{tensor, values};
 
 /// `bn.forward(x)`: in training on the CPU device the fused operation (and the running statistics

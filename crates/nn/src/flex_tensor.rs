@@ -4,7 +4,7 @@
 use std::borrow::Cow;
 
 use burn::backend::flex::FlexTensor;
-use burn::tensor::{DType, Shape, TensorData};
+use burn::tensor::{DType, Shape, Tensor, TensorData};
 
 /// Elements per parallel task of the element-wise kernels ([`crate::activation`],
 /// [`crate::gate`]): large enough that handing a piece to the pool costs little beside it.
@@ -59,4 +59,11 @@ pub(crate) fn tensor(values: Vec<f32>, shape: impl Into<Shape>) -> FlexTensor {
 /// Whether every tensor holds `f32` (the only dtype the kernels have).
 pub(crate) fn all_f32<'a>(tensors: impl IntoIterator<Item = &'a FlexTensor>) -> bool {
     tensors.into_iter().all(|t| t.dtype() == DType::F32)
+}
+
+/// A burn tensor's values as `f32`, in row-major order.
+pub(crate) fn f32_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data()
+        .try_into_vec_as::<f32>()
+        .expect("a float tensor converts to f32 values")
 }

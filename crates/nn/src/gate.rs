@@ -15,7 +15,7 @@ use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex, Tensor
 use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
-use crate::conv::on_cpu_training;
+use crate::cpu_mode::on_cpu_training;
 use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{tensor, values, ELEMENTWISE_CHUNK};
 

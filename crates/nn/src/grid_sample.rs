@@ -23,7 +23,7 @@ use burn::tensor::ops::{GridSampleOptions, GridSamplePaddingMode, InterpolateMod
 use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
-use crate::conv::on_cpu_training;
+use crate::cpu_mode::on_cpu_training;
 use crate::custom_op::{register, step_inputs, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 

@@ -43,6 +43,7 @@ pub mod batch_norm;
 pub mod bench;
 pub mod config;
 pub mod conv;
+mod cpu_mode;
 mod custom_op;
 pub mod device;
 pub mod dinov3;

@@ -17,8 +17,9 @@ use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{DType, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::cpu_mode::{on_cpu_inference, on_cpu_training};
 use crate::custom_op::{register, step_inputs, RecordOp};
+use crate::flex_tensor::f32_vec;
 use crate::flex_tensor::{dims, tensor, values};
 
 /// PyTorch's `avg_pool2d(x, k, stride, padding, count_include_pad=True)` with a square window.

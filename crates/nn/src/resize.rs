@@ -24,8 +24,9 @@ use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::cpu_mode::{on_cpu_inference, on_cpu_training};
 use crate::custom_op::{register, step_inputs, RecordOp};
+use crate::flex_tensor::f32_vec;
 use crate::flex_tensor::{dims, tensor, values};
 
 /// Bilinear resize of `B×C×H×W` to `size = [H', W']` with PyTorch's `align_corners` semantics.

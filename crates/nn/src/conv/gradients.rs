@@ -6,10 +6,9 @@
 
 use rayon::prelude::*;
 
-use super::kernels::{
-    conv2d_nchw, conv_transpose2d_nchw, Epilogue, Geometry, Nchw, TransposeGeometry,
-    MIN_TAP_CHANNELS,
-};
+use super::epilogue::Epilogue;
+use super::geometry::{Geometry, Nchw, TransposeGeometry};
+use super::kernels::{conv2d_nchw, conv_transpose2d_nchw, MIN_TAP_CHANNELS};
 use super::prepared::LayerWeights;
 use super::scratch::{Scratch, COLUMNS};
 use crate::matmul::{gemm_f32, Strided};

@@ -5,6 +5,8 @@
 
 use rayon::prelude::*;
 
+use super::epilogue::Epilogue;
+use super::geometry::{Geometry, Nchw, TransposeGeometry};
 use super::prepared::LayerWeights;
 use super::scratch::{Scratch, COLUMNS, PADDED, WIDE};
 use crate::matmul::{gemm_f32, Strided};
@@ -24,118 +26,6 @@ pub(super) const MIN_TAP_CHANNELS: usize = 16;
 /// bands are too short for its GEMMs (MonSter++'s 1/16 ConvGRU at 8×8: 0.53 ms against 0.34 ms
 /// as tap GEMMs; at 16×16 Winograd is ahead, 1.4 against 1.8 ms).
 const MIN_WINOGRAD_TILES: usize = 32;
-
-/// Shape of an NCHW tensor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Nchw {
-    pub b: usize,
-    pub c: usize,
-    pub h: usize,
-    pub w: usize,
-}
-
-/// Kernel size, stride, zero padding `[top, left, bottom, right]` and dilation of a convolution.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Geometry {
-    pub kernel: [usize; 2],
-    pub stride: [usize; 2],
-    pub padding: [usize; 4],
-    pub dilation: [usize; 2],
-}
-
-impl Geometry {
-    /// `[hp, wp]`: the size of an `h × w` input with its padding.
-    pub fn padded(&self, [h, w]: [usize; 2]) -> [usize; 2] {
-        let [top, left, bottom, right] = self.padding;
-        [h + top + bottom, w + left + right]
-    }
-
-    /// Output `[oh, ow]` for an `h × w` input.
-    pub fn output(&self, [h, w]: [usize; 2]) -> [usize; 2] {
-        let span = |k: usize, d: usize| d * (k - 1) + 1;
-        let [hp, wp] = self.padded([h, w]);
-        let (kh, kw) = (
-            span(self.kernel[0], self.dilation[0]),
-            span(self.kernel[1], self.dilation[1]),
-        );
-        assert!(
-            hp >= kh && wp >= kw,
-            "convolution: kernel larger than the padded input"
-        );
-        [
-            (hp - kh) / self.stride[0] + 1,
-            (wp - kw) / self.stride[1] + 1,
-        ]
-    }
-}
-
-/// The activation that ends a fused layer.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Activation {
-    Identity,
-    Relu,
-    LeakyRelu(f32),
-}
-
-impl Activation {
-    #[inline]
-    pub fn apply(self, v: f32) -> f32 {
-        match self {
-            Activation::Identity => v,
-            Activation::Relu => v.max(0.0),
-            Activation::LeakyRelu(slope) => {
-                if v >= 0.0 {
-                    v
-                } else {
-                    v * slope
-                }
-            }
-        }
-    }
-}
-
-/// `out[c] = act(scale[c]·acc[c] + shift[c])`, per output channel (`None`: 1 and 0).
-#[derive(Debug, Clone, Copy)]
-pub struct Epilogue<'a> {
-    pub scale: Option<&'a [f32]>,
-    pub shift: Option<&'a [f32]>,
-    pub act: Activation,
-}
-
-impl<'a> Epilogue<'a> {
-    /// A bias and nothing else.
-    pub fn bias(bias: Option<&'a [f32]>) -> Self {
-        Epilogue {
-            scale: None,
-            shift: bias,
-            act: Activation::Identity,
-        }
-    }
-
-    #[inline]
-    pub(super) fn channel(&self, c: usize) -> (f32, f32) {
-        (
-            self.scale.map_or(1.0, |s| s[c]),
-            self.shift.map_or(0.0, |s| s[c]),
-        )
-    }
-
-    /// Applies the map in place to one image `[co, plane]`.
-    fn apply(&self, image: &mut [f32], plane: usize) {
-        if self.scale.is_none() && self.shift.is_none() && self.act == Activation::Identity {
-            return;
-        }
-        image
-            .par_chunks_mut(plane)
-            .enumerate()
-            .for_each(|(c, values)| {
-                let (scale, shift) = self.channel(c);
-                for v in values {
-                    *v = self.act.apply(*v * scale + shift);
-                }
-            });
-    }
-}
 
 /// Convolution of `input` (`shape`, NCHW) with `weights` (`[co, ci, kh, kw]`), then
 /// `epilogue`. Returns the output (`[b, co, oh, ow]`) and `[oh, ow]`.
@@ -195,7 +85,7 @@ pub fn conv2d_nchw(
 /// `wp`; for tap `(i, j)` the input it reads is the padded image shifted by `i·dh·wp + j·dw`,
 /// a plain strided matrix `[ci, oh·wp]` (row stride `hp·wp`). The `wp − ow` extra columns of
 /// each row are discarded when the epilogue writes `out`. `taps` is the weight tap-major
-/// ([`tap_weights`]).
+/// ([`LayerWeights::tap_major`]).
 fn conv_taps(
     input: &[f32],
     shape: Nchw,
@@ -405,32 +295,6 @@ pub(super) fn unfold_rows(
         });
 }
 
-/// Kernel size, stride, padding `[ph, pw]` (removed from both sides), dilation and extra
-/// output padding of a transposed convolution (PyTorch's `ConvTranspose2d` arguments).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TransposeGeometry {
-    pub kernel: [usize; 2],
-    pub stride: [usize; 2],
-    pub padding: [usize; 2],
-    pub dilation: [usize; 2],
-    pub padding_out: [usize; 2],
-}
-
-impl TransposeGeometry {
-    /// Output `[oh, ow]` for an `h × w` input: `(h−1)·s − 2p + d·(k−1) + p_out + 1`.
-    pub fn output(&self, [h, w]: [usize; 2]) -> [usize; 2] {
-        let size = |n: usize, a: usize| {
-            ((n - 1) * self.stride[a]
-                + self.dilation[a] * (self.kernel[a] - 1)
-                + self.padding_out[a]
-                + 1)
-            .checked_sub(2 * self.padding[a])
-            .expect("transposed convolution: padding larger than the output")
-        };
-        [size(h, 0), size(w, 1)]
-    }
-}
-
 /// Transposed convolution of `input` (`shape`) with `weight` (`[ci, co, kh, kw]`, PyTorch's
 /// layout, one group), plus `bias`, then `epilogue`. Each band of input rows is multiplied by
 /// the weight in one GEMM (`[co·kh·kw, pixels]`: what every input pixel adds to each tap), then
@@ -516,19 +380,6 @@ pub fn conv_transpose2d_nchw(
     }
     columns.give_back(&COLUMNS);
     (out, [oh, ow])
-}
-
-/// `[co, ci, taps]` → `[taps, co, ci]`: one contiguous `co × ci` matrix per tap.
-pub(super) fn tap_weights(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
-    let mut out = vec![0.0f32; weight.len()];
-    for (o, per_out) in weight.chunks_exact(ci * taps).enumerate() {
-        for (i, per_in) in per_out.chunks_exact(taps).enumerate() {
-            for (t, &v) in per_in.iter().enumerate() {
-                out[(t * co + o) * ci + i] = v;
-            }
-        }
-    }
-    out
 }
 
 /// Writes `image` (`[c, h, w]`) into the interior of `padded` (`[c, hp, wp]`) and zeros its

@@ -11,6 +11,8 @@
 //! groups, `Same` padding) keeps burn's layers, so the functions here are drop-ins for
 //! `forward`.
 
+mod epilogue;
+mod geometry;
 mod gradients;
 mod kernels;
 mod prepared;
@@ -23,13 +25,17 @@ use std::sync::Arc;
 
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::nn::{BatchNorm, PaddingConfig2d};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 
 use crate::activation::{leaky_relu, relu};
+use crate::cpu_mode::{cpu_mode, CpuMode};
+use crate::flex_tensor::f32_vec;
 
-pub use kernels::{
-    conv2d_nchw, conv_transpose2d_nchw, Activation, Epilogue, Geometry, Nchw, TransposeGeometry,
-};
+pub use crate::cpu_mode::{on_cpu_inference, on_cpu_training};
+
+pub use epilogue::{Activation, Epilogue};
+pub use geometry::{Geometry, Nchw, TransposeGeometry};
+pub use kernels::{conv2d_nchw, conv_transpose2d_nchw};
 pub(crate) use prepared::prepared;
 pub use prepared::{with_prepared_weights, LayerWeights};
 pub use volume::{conv3d_forward, conv_transpose3d_forward, Geometry3};
@@ -201,38 +207,6 @@ fn layer_geometry(conv: &Conv2d) -> Option<Geometry> {
     })
 }
 
-/// How the kernels run on a CPU tensor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum CpuMode {
-    /// Plain values: fused epilogues, weights prepared once per pass.
-    Inference,
-    /// Under autodiff: the kernels as a burn operation with their backward.
-    Training,
-}
-
-/// Whether `x` is on the CPU device, and with or without autodiff.
-fn cpu_mode<const D: usize>(x: &Tensor<D>) -> Option<CpuMode> {
-    let device = x.device();
-    (device == Device::flex()).then(|| {
-        if device.is_autodiff() {
-            CpuMode::Training
-        } else {
-            CpuMode::Inference
-        }
-    })
-}
-
-/// The plain CPU device without autodiff (device equality ignores the autodiff wrapper: it is
-/// asked separately).
-pub fn on_cpu_inference<const D: usize>(x: &Tensor<D>) -> bool {
-    cpu_mode(x) == Some(CpuMode::Inference)
-}
-
-/// The CPU device with autodiff: where the kernels run as burn operations with their backward.
-pub fn on_cpu_training<const D: usize>(x: &Tensor<D>) -> bool {
-    cpu_mode(x) == Some(CpuMode::Training)
-}
-
 /// Per-channel `(scale, shift)` of `bn(y + bias)`: `scale = γ/√(σ²+ε)`,
 /// `shift = β + (bias − μ)·scale`; without `bn`, just the bias.
 fn affine(bias: Option<Vec<f32>>, bn: Option<&BatchNorm>) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
@@ -267,19 +241,13 @@ fn burn_layers(y: Tensor<4>, bn: Option<&BatchNorm>, act: Activation) -> Tensor<
     }
 }
 
-pub(crate) fn f32_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .try_into_vec_as::<f32>()
-        .expect("a float tensor converts to f32 values")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use burn::module::Param;
     use burn::nn::conv::{Conv2dConfig, ConvTranspose2dConfig};
     use burn::nn::BatchNormConfig;
-    use burn::tensor::Distribution;
+    use burn::tensor::{Device, Distribution};
 
     fn close(a: Tensor<4>, b: Tensor<4>) {
         assert_eq!(a.dims(), b.dims());

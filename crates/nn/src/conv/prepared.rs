@@ -14,7 +14,6 @@ use std::sync::{Arc, OnceLock};
 
 use burn::module::ParamId;
 
-use super::kernels::tap_weights;
 use super::winograd::transform_weights;
 
 /// A convolution's weights `[co, ci, kh, kw]` (row-major), and the layouts derived from them on
@@ -180,6 +179,19 @@ fn cached(
     };
     CACHE.with(|c| c.borrow_mut().insert(key, entry));
     weights
+}
+
+/// `[co, ci, taps]` → `[taps, co, ci]`: one contiguous `co × ci` matrix per tap.
+fn tap_weights(weight: &[f32], co: usize, ci: usize, taps: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; weight.len()];
+    for (o, per_out) in weight.chunks_exact(ci * taps).enumerate() {
+        for (i, per_in) in per_out.chunks_exact(taps).enumerate() {
+            for (t, &v) in per_in.iter().enumerate() {
+                out[(t * co + o) * ci + i] = v;
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]

@@ -22,10 +22,10 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{backend_extension, Autodiff, Backend, Dispatch, Flex};
 use burn::tensor::Tensor;
 
+use super::epilogue::Epilogue;
+use super::geometry::{Geometry, Nchw, TransposeGeometry};
 use super::gradients::{bias_grad, conv2d_input_grad, conv2d_weight_grad};
-use super::kernels::{
-    conv2d_nchw, conv_transpose2d_nchw, Epilogue, Geometry, Nchw, TransposeGeometry,
-};
+use super::kernels::{conv2d_nchw, conv_transpose2d_nchw};
 use super::prepared::{prepared_for_buffer, LayerWeights};
 use crate::custom_op::{checkpoint_input_and_weight, checkpointed_step_inputs, register, RecordOp};
 use crate::flex_tensor::{all_f32, dims, tensor, values};

@@ -24,7 +24,7 @@ use burn::nn::PaddingConfig3d;
 use burn::tensor::Tensor;
 use rayon::prelude::*;
 
-use super::on_cpu_training;
+use crate::cpu_mode::on_cpu_training;
 use crate::custom_op::{checkpoint_input_and_weight, checkpointed_step_inputs, register, RecordOp};
 use crate::flex_tensor::{dims, tensor, values};
 use crate::matmul::{gemm_f32, Strided};

@@ -10,7 +10,8 @@
 
 use rayon::prelude::*;
 
-use super::kernels::{Epilogue, Nchw};
+use super::epilogue::Epilogue;
+use super::geometry::Nchw;
 use super::scratch::{Scratch, PADDED};
 use crate::matmul::{gemm_f32, SharedOut, Strided};
 

@@ -15,9 +15,10 @@ use burn::tensor::{Device, Tensor};
 use crate::activation::relu;
 use crate::config::DptConfig;
 use crate::conv::{
-    conv2d_forward, conv2d_fused, conv2d_with, conv_transpose2d_with, on_cpu_inference, Activation,
-    Geometry, TransposeGeometry,
+    conv2d_forward, conv2d_fused, conv2d_with, conv_transpose2d_with, Activation, Geometry,
+    TransposeGeometry,
 };
+use crate::cpu_mode::on_cpu_inference;
 use crate::monster::vit::VitFeatures;
 use crate::resize::resize_bilinear;
 

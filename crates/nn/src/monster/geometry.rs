@@ -13,7 +13,8 @@
 use burn::tensor::{Int, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::conv::{f32_vec, on_cpu_inference, on_cpu_training};
+use crate::cpu_mode::{on_cpu_inference, on_cpu_training};
+use crate::flex_tensor::f32_vec;
 use crate::interp::{linear_tap, linear_taps};
 use crate::matmul::SharedOut;
 

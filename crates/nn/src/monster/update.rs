@@ -15,10 +15,11 @@ use rayon::prelude::*;
 
 use crate::activation::{sigmoid, tanh};
 use crate::conv::{
-    conv2d_forward, conv2d_fused, conv2d_nchw, f32_vec, geometry, layer_weights, prepared,
-    Activation, Epilogue, Geometry, LayerWeights, Nchw,
+    conv2d_forward, conv2d_fused, conv2d_nchw, geometry, layer_weights, prepared, Activation,
+    Epilogue, Geometry, LayerWeights, Nchw,
 };
 use crate::fastmath;
+use crate::flex_tensor::f32_vec;
 use crate::gate::gru_blend;
 use crate::pool::avg_pool2d_padded;
 use crate::resize::resize_bilinear;

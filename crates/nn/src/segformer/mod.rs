@@ -23,6 +23,7 @@
 pub mod config;
 pub mod decoder;
 pub mod encoder;
+mod error;
 pub mod model;
 pub mod postprocess;
 pub mod preprocess;
@@ -38,24 +39,9 @@ use dataset::segmentation::{MaskKind, MaskOptions, Segmentation};
 pub use model::Segformer;
 pub use trace::Trace;
 
-use crate::weights::{LoadReport, WeightsError};
+use crate::weights::LoadReport;
 
-/// Errors of segmentation.
-#[derive(Debug, thiserror::Error)]
-pub enum SegformerError {
-    /// The checkpoint could not be read or does not fit the model.
-    #[error(transparent)]
-    Weights(#[from] WeightsError),
-    /// A raster operation failed (sizes).
-    #[error(transparent)]
-    Raster(#[from] raster::RasterError),
-    /// The masks could not be made from the scores.
-    #[error(transparent)]
-    Masks(#[from] dataset::DatasetError),
-    /// Bad input (not 8-bit, empty, bad configuration).
-    #[error("segmentation: {0}")]
-    Input(String),
-}
+pub use error::SegformerError;
 
 /// What a [`Segmenter`] does besides the network: the input size and the per-mask options.
 #[derive(Debug, Clone, PartialEq)]

@@ -8,7 +8,7 @@ use dataset::segmentation::{
 };
 use raster::Image;
 
-use super::SegformerError;
+use super::error::SegformerError;
 
 /// The whole post-processing of the logits (1×L×h×w) of a `width`×`height` original image.
 /// `options` are for water, tree, building in that order.

@@ -5,7 +5,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use raster::resize::resize_pil_bilinear_u8;
 use raster::Image;
 
-use super::SegformerError;
+use super::error::SegformerError;
 
 /// ImageNet channel means (RGB).
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
