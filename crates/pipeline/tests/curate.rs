@@ -5,10 +5,10 @@ use std::path::Path;
 
 use dataset::Shard;
 use matching::SgmParams;
+use pipeline::matcher::Matcher;
 use pipeline::stages::curate::features::HistogramDescriptor;
 use pipeline::stages::curate::select::{roc_auc, Keep};
 use pipeline::stages::curate::{run_curate, ColourStatistic, CurateOptions, SsimScale};
-use pipeline::matcher::Matcher;
 use pipeline::stages::teacher::{run_teacher, TeacherOptions};
 use pipeline::Silent;
 use raster::Image;

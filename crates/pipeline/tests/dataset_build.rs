@@ -9,8 +9,8 @@ use dataset::experiment::read_experiment_csv;
 use dataset::layout::{DatasetDir, MaskKind};
 use dataset::manifest::Manifest;
 use dataset::{load_sample, PairKind, PairStem, SampleIndex, Shard, Side, Subset};
-use pipeline::stages::dataset_build::{run_build, BuildOptions, MaskDirs};
 use pipeline::matcher::Matcher;
+use pipeline::stages::dataset_build::{run_build, BuildOptions, MaskDirs};
 use pipeline::stages::synthesize::{run_synthesize, SynthesizeOptions};
 use pipeline::stages::teacher::{run_teacher, TeacherOptions};
 use pipeline::stages::world_training::{

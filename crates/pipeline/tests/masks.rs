@@ -210,7 +210,10 @@ fn bad_inputs_are_explained() {
         &raster::Image::filled(4, 4, 3, 1.0),
     )
     .unwrap();
-    let err = format!("{:#}", pipeline::stages::masks::list_images(&images).unwrap_err());
+    let err = format!(
+        "{:#}",
+        pipeline::stages::masks::list_images(&images).unwrap_err()
+    );
     assert!(err.contains("same stem"), "{err}");
 }
 
@@ -244,7 +247,8 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
             pairs: vec![],
         };
         let options = MaskKind::ALL.map(dataset::segmentation::MaskOptions::defaults);
-        let s = pipeline::stages::masks::rules::segment(&w.left.image, Some(&heights), &options).unwrap();
+        let s = pipeline::stages::masks::rules::segment(&w.left.image, Some(&heights), &options)
+            .unwrap();
         for (k, (kind, id)) in [
             (MaskKind::Tree, class::TREE),
             (MaskKind::Building, class::BUILDING),

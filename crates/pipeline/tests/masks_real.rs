@@ -8,15 +8,17 @@
 use std::path::Path;
 
 use matching::SgmParams;
-use pipeline::stages::dataset_build::rectify_mask;
 use pipeline::dsm::GridChoice;
+use pipeline::matcher::Matcher;
+use pipeline::reconstruct::{reconstruct, ReconstructOptions};
+use pipeline::stages::dataset_build::rectify_mask;
 use pipeline::stages::masks::heights::PairIndex;
 use pipeline::stages::masks::score::{
     read_masks, registration, score_folder, score_masks, ClassTruth, ImageScore,
 };
-use pipeline::stages::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter};
-use pipeline::matcher::Matcher;
-use pipeline::reconstruct::{reconstruct, ReconstructOptions};
+use pipeline::stages::masks::{
+    run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter,
+};
 use pipeline::Silent;
 
 mod common;
