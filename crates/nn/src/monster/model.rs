@@ -127,6 +127,43 @@ pub struct MonsterOutput {
     pub scale_shift: Vec<(f32, f32)>,
 }
 
+/// The stereo side's feature maps (§2.2).
+struct StereoMaps {
+    /// `stem_2x` … `stem_16x` of the left image.
+    stems: [Tensor<4>; 4],
+    /// `cat(f4, stem_4x)`, `f8`, `f16`, `f32` of the left image.
+    features_left: [Tensor<4>; 4],
+    /// `cat(f4, stem_4y)` of the right image.
+    features_right0: Tensor<4>,
+    /// The matching descriptors `desc(conv(features[0]))` of both images.
+    match_left: Tensor<4>,
+    match_right: Tensor<4>,
+}
+
+/// Panics unless `left` and `right` are `B×3×H×W` images of one shape with H and W multiples
+/// of 32, and `iters` covers the seven dual-branch iterations.
+fn check_inputs(left: &Tensor<4>, right: &Tensor<4>, iters: usize) {
+    let [b, ch, h, w] = left.dims();
+    assert_eq!(
+        left.dims(),
+        right.dims(),
+        "Monster::forward: left and right images differ in shape"
+    );
+    assert!(
+        ch == 3 && b > 0,
+        "Monster::forward: expected B×3×H×W images, got {:?}",
+        left.dims()
+    );
+    assert!(
+        h > 0 && w > 0 && h % 32 == 0 && w % 32 == 0,
+        "Monster::forward: H and W must be positive multiples of 32, got {h}×{w} (pad first)"
+    );
+    assert!(
+        iters >= 7,
+        "Monster::forward: iters ({iters}) must be at least 7 (the last 7 are dual-branch)"
+    );
+}
+
 /// Root-key prefixes of the mono branch, frozen during training.
 const MONO_PREFIXES: [&str; 2] = ["mono_encoder.", "mono_decoder."];
 
@@ -206,43 +243,25 @@ impl Monster {
         iters: usize,
         test_mode: bool,
     ) -> MonsterOutput {
+        check_inputs(&left, &right, iters);
         // The iteration loop runs its layers many times: prepare their weights once.
         on_cpu_pool(&left.device(), || {
-            with_prepared_weights(|| self.forward_pass(left, right, iters, test_mode))
+            with_prepared_weights(|| self.forward_pass([left, right], iters, test_mode))
         })
     }
 
+    /// The network on checked inputs: the mono branch (§2.1), the stereo features (§2.2), the
+    /// cost volume and initial disparity (§2.3), the context (§2.4), the Combined Geo Encoding
+    /// Volume (§2.5) and the refinement iterations (§2.6).
     fn forward_pass(
         &self,
-        left: Tensor<4>,
-        right: Tensor<4>,
+        [left, right]: [Tensor<4>; 2],
         iters: usize,
         test_mode: bool,
     ) -> MonsterOutput {
-        let [b, ch, h, w] = left.dims();
-        assert_eq!(
-            left.dims(),
-            right.dims(),
-            "Monster::forward: left and right images differ in shape"
-        );
-        assert!(
-            ch == 3 && b > 0,
-            "Monster::forward: expected B×3×H×W images, got {:?}",
-            left.dims()
-        );
-        assert!(
-            h > 0 && w > 0 && h % 32 == 0 && w % 32 == 0,
-            "Monster::forward: H and W must be positive multiples of 32, got {h}×{w} (pad first)"
-        );
-        assert!(
-            iters >= 7,
-            "Monster::forward: iters ({iters}) must be at least 7 (the last 7 are dual-branch)"
-        );
-
+        let [_, _, h, w] = left.dims();
         let image1 = normalize_image(left);
         let image2 = normalize_image(right);
-
-        // Mono branch (§2.1).
         let mono = infer_mono(
             &self.mono_encoder,
             &self.mono_decoder,
@@ -252,96 +271,30 @@ impl Monster {
         );
         let depth_mono = mono.depth_mono;
         let disp_mono_4x = resize_bilinear(depth_mono.clone(), [h / 4, w / 4], false);
-
-        // Stereo features (§2.2).
-        let stems = span(STEMS, || {
-            let [fl4, fl8, fl16, fl32] = self.feat_transfer.forward(mono.features_left.clone());
-            let [fr4, _, _, _] = self.feat_transfer.forward(mono.features_right);
-            let stem_2x = conv_in_block_forward(&self.stem_2, image1.clone());
-            let stem_4x = conv_in_block_forward(&self.stem_4, stem_2x.clone());
-            let stem_8x = conv_in_block_forward(&self.stem_8, stem_4x.clone());
-            let stem_16x = conv_in_block_forward(&self.stem_16, stem_8x.clone());
-            let stem_2y = conv_in_block_forward(&self.stem_2, image2.clone());
-            let stem_4y = conv_in_block_forward(&self.stem_4, stem_2y);
-            let features_left = [Tensor::cat(vec![fl4, stem_4x.clone()], 1), fl8, fl16, fl32];
-            let features_right0 = Tensor::cat(vec![fr4, stem_4y], 1);
-            let match_left =
-                conv2d_forward(&self.desc, self.conv.forward(features_left[0].clone()));
-            let match_right =
-                conv2d_forward(&self.desc, self.conv.forward(features_right0.clone()));
-            (
-                [stem_2x, stem_4x, stem_8x, stem_16x],
-                features_left,
-                features_right0,
-                match_left,
-                match_right,
-            )
+        let stereo = span(STEMS, || {
+            self.stereo_features(&mono.features_left, mono.features_right, [&image1, &image2])
         });
-        let (
-            [stem_2x, stem_4x, stem_8x, stem_16x],
-            features_left,
-            features_right0,
-            match_left,
-            match_right,
-        ) = stems;
-
-        // Cost volume, 3-D aggregation, initial disparity (§2.3).
-        let gwc = span("gwc volume", || {
-            build_gwc_volume(
-                match_left.clone(),
-                match_right.clone(),
-                self.config.disp_bins(),
-                GWC_GROUPS,
-            )
-        });
-        let (geo_volume, init_disp) = span("3-d hourglass + init disparity", || {
-            let gwc = self
-                .corr_feature_att
-                .forward(self.corr_stem.forward(gwc), features_left[0].clone());
-            let geo_volume = self.cost_agg.forward(gwc, &features_left);
-            let logits: Tensor<5> = self.classifier.forward(geo_volume.clone());
-            let prob = softmax(logits.squeeze_dim::<4>(1), 1);
-            (geo_volume, disparity_regression(prob))
-        });
-
-        let init_disp_up = (!test_mode).then(|| {
-            let x = conv_in_block_forward(&self.spx_4, features_left[0].clone());
-            let x = self.spx_2.forward(x, stem_2x.clone());
-            let spx_pred = softmax(conv_transpose2d_forward(&self.spx[0], x), 1);
-            context_upsample(init_disp.clone().mul_scalar(4.0), spx_pred)
-        });
-
-        // Context (§2.4).
+        let [stem_2x, stem_4x, stem_8x, stem_16x] = stereo.stems;
+        let (geo_volume, init_disp) = self.initial_disparity(
+            &stereo.match_left,
+            &stereo.match_right,
+            &stereo.features_left,
+        );
+        let init_disp_up = (!test_mode)
+            .then(|| self.superpixel_upsample(&init_disp, &stereo.features_left[0], &stem_2x));
         let (net, inp) = span(STEMS, || {
-            let cnet = self
-                .feat_transfer_cnet
-                .forward(&mono.features_left, [stem_4x, stem_8x, stem_16x]);
-            let net = cnet.clone().map(tanh);
-            let inp: [GruContext; 3] = std::array::from_fn(|i| {
-                let conv = &self.context_zqr_convs[i];
-                let y = conv2d_forward(conv, relu(cnet[i].clone()));
-                let c = y.dims()[1] / 3;
-                let mut parts = y.split(c, 1).into_iter();
-                [
-                    parts.next().expect("cz"),
-                    parts.next().expect("cr"),
-                    parts.next().expect("cq"),
-                ]
-            });
-            (net, inp)
+            self.context(&mono.features_left, [stem_4x, stem_8x, stem_16x])
         });
-
-        // Combined Geo Encoding Volume (§2.5) and the iterations (§2.6).
         let geo = span(GEO, || {
             GeoEncodingVolume::new(
-                match_left,
-                match_right,
+                stereo.match_left,
+                stereo.match_right,
                 geo_volume,
                 self.config.corr_radius,
                 self.config.corr_levels,
             )
         });
-        let [features_left0, ..] = features_left;
+        let [features_left0, ..] = stereo.features_left;
         let out = iterate(
             &self.iteration_blocks(),
             IterationInputs {
@@ -351,7 +304,7 @@ impl Monster {
                 net,
                 inp,
                 features_left0,
-                features_right0,
+                features_right0: stereo.features_right0,
                 stem_2x,
                 image1,
                 image2,
@@ -366,6 +319,98 @@ impl Monster {
             depth_mono,
             scale_shift: out.scale_shift,
         }
+    }
+
+    /// The stereo features (§2.2) of the normalised `images` from the mono branch's left and
+    /// right feature paths: the stems of the left image and the matching descriptors.
+    fn stereo_features(
+        &self,
+        mono_left: &[Tensor<4>; 4],
+        mono_right: [Tensor<4>; 4],
+        [image1, image2]: [&Tensor<4>; 2],
+    ) -> StereoMaps {
+        let [fl4, fl8, fl16, fl32] = self.feat_transfer.forward(mono_left.clone());
+        let [fr4, _, _, _] = self.feat_transfer.forward(mono_right);
+        let stem_2x = conv_in_block_forward(&self.stem_2, image1.clone());
+        let stem_4x = conv_in_block_forward(&self.stem_4, stem_2x.clone());
+        let stem_8x = conv_in_block_forward(&self.stem_8, stem_4x.clone());
+        let stem_16x = conv_in_block_forward(&self.stem_16, stem_8x.clone());
+        let stem_2y = conv_in_block_forward(&self.stem_2, image2.clone());
+        let stem_4y = conv_in_block_forward(&self.stem_4, stem_2y);
+        let features_left = [Tensor::cat(vec![fl4, stem_4x.clone()], 1), fl8, fl16, fl32];
+        let features_right0 = Tensor::cat(vec![fr4, stem_4y], 1);
+        let match_left = conv2d_forward(&self.desc, self.conv.forward(features_left[0].clone()));
+        let match_right = conv2d_forward(&self.desc, self.conv.forward(features_right0.clone()));
+        StereoMaps {
+            stems: [stem_2x, stem_4x, stem_8x, stem_16x],
+            features_left,
+            features_right0,
+            match_left,
+            match_right,
+        }
+    }
+
+    /// The group-wise correlation volume of the descriptors, aggregated by the 3-D hourglass
+    /// (§2.3): the aggregated volume and its soft-argmin disparity.
+    fn initial_disparity(
+        &self,
+        match_left: &Tensor<4>,
+        match_right: &Tensor<4>,
+        features_left: &[Tensor<4>; 4],
+    ) -> (Tensor<5>, Tensor<4>) {
+        let gwc = span("gwc volume", || {
+            build_gwc_volume(
+                match_left.clone(),
+                match_right.clone(),
+                self.config.disp_bins(),
+                GWC_GROUPS,
+            )
+        });
+        span("3-d hourglass + init disparity", || {
+            let gwc = self
+                .corr_feature_att
+                .forward(self.corr_stem.forward(gwc), features_left[0].clone());
+            let geo_volume = self.cost_agg.forward(gwc, features_left);
+            let logits: Tensor<5> = self.classifier.forward(geo_volume.clone());
+            let prob = softmax(logits.squeeze_dim::<4>(1), 1);
+            (geo_volume, disparity_regression(prob))
+        })
+    }
+
+    /// Train mode's `init_disp_up`: the initial disparity upsampled by the superpixel head.
+    fn superpixel_upsample(
+        &self,
+        init_disp: &Tensor<4>,
+        features_left0: &Tensor<4>,
+        stem_2x: &Tensor<4>,
+    ) -> Tensor<4> {
+        let x = conv_in_block_forward(&self.spx_4, features_left0.clone());
+        let x = self.spx_2.forward(x, stem_2x.clone());
+        let spx_pred = softmax(conv_transpose2d_forward(&self.spx[0], x), 1);
+        context_upsample(init_disp.clone().mul_scalar(4.0), spx_pred)
+    }
+
+    /// The GRU context (§2.4): the initial hidden states `tanh(cnet)` and per level the
+    /// `[cz, cr, cq]` thirds of `context_zqr_convs[i](relu(cnet_i))`.
+    fn context(
+        &self,
+        mono_left: &[Tensor<4>; 4],
+        stems: [Tensor<4>; 3],
+    ) -> ([Tensor<4>; 3], [GruContext; 3]) {
+        let cnet = self.feat_transfer_cnet.forward(mono_left, stems);
+        let net = cnet.clone().map(tanh);
+        let inp: [GruContext; 3] = std::array::from_fn(|i| {
+            let conv = &self.context_zqr_convs[i];
+            let y = conv2d_forward(conv, relu(cnet[i].clone()));
+            let c = y.dims()[1] / 3;
+            let mut parts = y.split(c, 1).into_iter();
+            [
+                parts.next().expect("cz"),
+                parts.next().expect("cr"),
+                parts.next().expect("cq"),
+            ]
+        });
+        (net, inp)
     }
 
     /// The modules of the refinement loop, borrowed.

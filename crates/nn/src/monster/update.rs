@@ -482,6 +482,8 @@ impl BasicMultiUpdateBlockMix2 {
 // The iteration driver (upstream `Monster.forward`, the `for itr in range(iters)` loop).
 // ---------------------------------------------------------------------------------------------
 
+use std::collections::HashMap;
+
 use burn::nn::conv::ConvTranspose2d;
 
 use super::geometry::{GeoEncodingVolume, GEO};
@@ -570,7 +572,7 @@ pub fn iterate_traced(
     let IterationInputs {
         geo,
         init_disp,
-        mut disp_mono_4x,
+        disp_mono_4x,
         net,
         inp,
         features_left0,
@@ -579,138 +581,247 @@ pub fn iterate_traced(
         image1,
         image2,
     } = inputs;
-    let mut counts = std::collections::HashMap::<String, usize>::new();
-    let mut emit = |name: &str, t: &Tensor<4>| {
-        let n = counts.entry(name.to_string()).or_insert(0);
-        trace(&format!("{name}.{n}"), t);
-        *n += 1;
+    let run = Loop {
+        blocks,
+        geo,
+        inp,
+        features_left0,
+        features_right0,
+        stem_2x,
+        images: [image1, image2],
+        n: iters as i64,
+        test_mode,
     };
-    let emit_block = |prefix: &str, out: &UpdateOut, emit: &mut dyn FnMut(&str, &Tensor<4>)| {
-        emit(&format!("{prefix}.delta"), &out.delta);
-        emit(&format!("{prefix}.mask_feat"), &out.mask_feat);
-        for (i, n) in out.net.iter().enumerate() {
-            emit(&format!("{prefix}.net{i}"), n);
-        }
+    let mut tracer = Tracer {
+        trace,
+        counts: HashMap::new(),
     };
-
-    let n = iters as i64;
-    let mut net_list = net.clone();
-    let mut net_mono = net;
-    let mut disp = init_disp;
-    let mut disp_preds = Vec::new();
-    let mut scale_shift = Vec::new();
-    let mut mono_up: Option<Tensor<4>> = None;
-    let mut disp_up: Option<Tensor<4>> = None;
-    for itr in 0..n {
-        disp = disp.detach();
-        if itr >= 1 {
-            disp_mono_4x = disp_mono_4x.detach();
-        }
-        let geo_feat = span(GEO, || geo.lookup(&disp));
-        emit("geo_feat", &geo_feat);
-        let out = if itr <= n - 8 {
-            let out = span(GRU, || {
-                blocks
-                    .update_block
-                    .forward(net_list, &inp, geo_feat, disp.clone())
-            });
-            emit_block("update_block", &out, &mut emit);
-            out
-        } else {
-            let (warped_mono, warped_stereo) =
-                span("mutual refinement (warp, scale/shift)", || {
-                    if itr == n - 7 {
-                        let (aligned, params) = align_mono(disp_mono_4x.clone(), &disp);
-                        disp_mono_4x = aligned;
-                        scale_shift = params;
-                    }
-                    (
-                        disp_warp(features_right0.clone(), disp_mono_4x.clone()),
-                        disp_warp(features_right0.clone(), disp.clone()),
-                    )
-                });
-            emit("feat_warp", &warped_mono);
-            let flaw_mono = warped_mono - features_left0.clone();
-            emit("feat_warp", &warped_stereo);
-            let flaw_stereo = warped_stereo - features_left0.clone();
-            let geo_feat_mono = span(GEO, || geo.lookup(&disp_mono_4x));
-            let stereo = Branch {
-                disp: disp.clone(),
-                corr: geo_feat,
-                flaw: flaw_stereo,
-            };
-            let mono = Branch {
-                disp: disp_mono_4x.clone(),
-                corr: geo_feat_mono,
-                flaw: flaw_mono,
-            };
-            let out = span(GRU, || {
-                blocks
-                    .update_block_mix_stereo
-                    .forward(net_list, &inp, &stereo, &mono)
-            });
-            emit_block("update_block_mix_stereo", &out, &mut emit);
-            let out_m = span(GRU, || {
-                blocks
-                    .update_block_mix_mono
-                    .forward(net_mono, &inp, &mono, &stereo)
-            });
-            emit_block("update_block_mix_mono", &out_m, &mut emit);
-            disp_mono_4x = disp_mono_4x + out_m.delta;
-            net_mono = out_m.net;
-            if !test_mode || itr == n - 1 {
-                let up = span(UPSAMPLING, || {
-                    upsample_disp(
-                        blocks.spx_2_gru,
-                        blocks.spx_gru,
-                        disp_mono_4x.clone(),
-                        out_m.mask_feat,
-                        stem_2x.clone(),
-                    )
-                });
-                emit("upsample_disp", &up);
-                if !test_mode {
-                    disp_preds.push(up.clone());
-                }
-                mono_up = Some(up);
-            }
-            out
-        };
-        net_list = out.net;
-        disp = disp + out.delta;
-        if test_mode && itr < n - 1 {
-            continue;
-        }
-        let mut up = span(UPSAMPLING, || {
-            upsample_disp(
-                blocks.spx_2_gru,
-                blocks.spx_gru,
-                disp.clone(),
-                out.mask_feat,
-                stem_2x.clone(),
-            )
-        });
-        emit("upsample_disp", &up);
-        if itr == n - 1 {
-            let mono = mono_up
-                .clone()
-                .expect("the last iteration is a dual-branch one");
-            let refined = span("remp", || {
-                blocks
-                    .remp
-                    .forward(mono, up.clone(), image1.clone(), image2.clone())
-            });
-            emit("REMP", &refined);
-            up = up + refined; // quirk 4: disp_up + LeakyReLU(disp_up + residual)
-        }
-        if !test_mode {
-            disp_preds.push(up.clone());
-        }
-        disp_up = Some(up);
+    let mut net_stereo = net.clone();
+    let mut state = LoopState {
+        disp: init_disp,
+        mono: MonoBranch {
+            disp_4x: disp_mono_4x,
+            net,
+            up: None,
+        },
+        disp_up: None,
+        disp_preds: Vec::new(),
+        scale_shift: Vec::new(),
+    };
+    for itr in 0..run.n {
+        (net_stereo, state) = run.iteration(itr, net_stereo, state, &mut tracer);
     }
     IterationOutput {
-        disp: disp_up.expect("iters >= 1"),
-        disp_preds,
-        scale_shift,
+        disp: state.disp_up.expect("iters >= 1"),
+        disp_preds: state.disp_preds,
+        scale_shift: state.scale_shift,
+    }
+}
+
+/// Hands the loop's intermediates to the trace callback as `name.N`, `N` counting the calls
+/// of each name.
+struct Tracer<'t> {
+    trace: &'t mut dyn FnMut(&str, &Tensor<4>),
+    counts: HashMap<String, usize>,
+}
+
+impl Tracer<'_> {
+    fn emit(&mut self, name: &str, t: &Tensor<4>) {
+        let n = self.counts.entry(name.to_string()).or_insert(0);
+        (self.trace)(&format!("{name}.{n}"), t);
+        *n += 1;
+    }
+
+    /// An update block's outputs: `prefix.delta`, `prefix.mask_feat`, `prefix.net0..2`.
+    fn emit_block(&mut self, prefix: &str, out: &UpdateOut) {
+        self.emit(&format!("{prefix}.delta"), &out.delta);
+        self.emit(&format!("{prefix}.mask_feat"), &out.mask_feat);
+        for (i, n) in out.net.iter().enumerate() {
+            self.emit(&format!("{prefix}.net{i}"), n);
+        }
+    }
+}
+
+/// What the loop reads and does not change: the modules, the inputs, `n` iterations.
+struct Loop<'a> {
+    blocks: &'a IterationBlocks<'a>,
+    geo: GeoEncodingVolume,
+    inp: [GruContext; 3],
+    features_left0: Tensor<4>,
+    features_right0: Tensor<4>,
+    stem_2x: Tensor<4>,
+    /// The normalised left and right images (for REMP).
+    images: [Tensor<4>; 2],
+    n: i64,
+    test_mode: bool,
+}
+
+/// The mono branch of the last seven iterations: its 1/4 disparity (the aligned mono depth
+/// after iteration `n − 7`), its hidden states and its latest full-resolution prediction.
+struct MonoBranch {
+    disp_4x: Tensor<4>,
+    net: [Tensor<4>; 3],
+    up: Option<Tensor<4>>,
+}
+
+/// What the loop carries between iterations besides the stereo hidden states.
+struct LoopState {
+    /// The stereo disparity at 1/4 resolution.
+    disp: Tensor<4>,
+    mono: MonoBranch,
+    /// The latest full-resolution stereo prediction.
+    disp_up: Option<Tensor<4>>,
+    disp_preds: Vec<Tensor<4>>,
+    scale_shift: Vec<(f32, f32)>,
+}
+
+impl Loop<'_> {
+    /// Iteration `itr`: the geometry lookup at the current disparity, a GRU update (of the
+    /// stereo branch alone before the last seven iterations, of both in them), the disparity
+    /// step, and its full-resolution prediction where one is kept. Returns the new stereo
+    /// hidden states and state.
+    fn iteration(
+        &self,
+        itr: i64,
+        net: [Tensor<4>; 3],
+        mut state: LoopState,
+        tracer: &mut Tracer<'_>,
+    ) -> ([Tensor<4>; 3], LoopState) {
+        state.disp = state.disp.detach();
+        if itr >= 1 {
+            state.mono.disp_4x = state.mono.disp_4x.detach();
+        }
+        let geo_feat = span(GEO, || self.geo.lookup(&state.disp));
+        tracer.emit("geo_feat", &geo_feat);
+        let out = if itr <= self.n - 8 {
+            let out = span(GRU, || {
+                self.blocks
+                    .update_block
+                    .forward(net, &self.inp, geo_feat, state.disp.clone())
+            });
+            tracer.emit_block("update_block", &out);
+            out
+        } else {
+            let out;
+            (out, state) = self.dual_branch_update(itr, net, state, geo_feat, tracer);
+            out
+        };
+        state.disp = state.disp + out.delta;
+        if !self.test_mode || itr == self.n - 1 {
+            self.predict(itr, &mut state, out.mask_feat, tracer);
+        }
+        (out.net, state)
+    }
+
+    /// The mutual refinement of iterations `n − 7` onwards: the mono disparity aligned to the
+    /// stereo one (at the first), both branches' features warped by their disparities, then
+    /// each branch's update block fed its own and the other's; the mono branch steps and
+    /// upsamples here. Returns the stereo block's output.
+    fn dual_branch_update(
+        &self,
+        itr: i64,
+        net: [Tensor<4>; 3],
+        mut state: LoopState,
+        geo_feat: Tensor<4>,
+        tracer: &mut Tracer<'_>,
+    ) -> (UpdateOut, LoopState) {
+        let (warped_mono, warped_stereo) = span("mutual refinement (warp, scale/shift)", || {
+            if itr == self.n - 7 {
+                let (aligned, params) = align_mono(state.mono.disp_4x.clone(), &state.disp);
+                state.mono.disp_4x = aligned;
+                state.scale_shift = params;
+            }
+            (
+                disp_warp(self.features_right0.clone(), state.mono.disp_4x.clone()),
+                disp_warp(self.features_right0.clone(), state.disp.clone()),
+            )
+        });
+        tracer.emit("feat_warp", &warped_mono);
+        let flaw_mono = warped_mono - self.features_left0.clone();
+        tracer.emit("feat_warp", &warped_stereo);
+        let flaw_stereo = warped_stereo - self.features_left0.clone();
+        let geo_feat_mono = span(GEO, || self.geo.lookup(&state.mono.disp_4x));
+        let stereo = Branch {
+            disp: state.disp.clone(),
+            corr: geo_feat,
+            flaw: flaw_stereo,
+        };
+        let mono = Branch {
+            disp: state.mono.disp_4x.clone(),
+            corr: geo_feat_mono,
+            flaw: flaw_mono,
+        };
+        let blocks = self.blocks;
+        let out = span(GRU, || {
+            blocks
+                .update_block_mix_stereo
+                .forward(net, &self.inp, &stereo, &mono)
+        });
+        tracer.emit_block("update_block_mix_stereo", &out);
+        let out_m = span(GRU, || {
+            blocks
+                .update_block_mix_mono
+                .forward(state.mono.net, &self.inp, &mono, &stereo)
+        });
+        tracer.emit_block("update_block_mix_mono", &out_m);
+        state.mono.disp_4x = state.mono.disp_4x + out_m.delta;
+        state.mono.net = out_m.net;
+        if !self.test_mode || itr == self.n - 1 {
+            let up = self.upsample(state.mono.disp_4x.clone(), out_m.mask_feat, tracer);
+            if !self.test_mode {
+                state.disp_preds.push(up.clone());
+            }
+            state.mono.up = Some(up);
+        }
+        (out, state)
+    }
+
+    /// The stereo disparity's full-resolution prediction, at the last iteration refined by
+    /// REMP with the mono branch's; kept as the latest and, in training, as a prediction.
+    fn predict(
+        &self,
+        itr: i64,
+        state: &mut LoopState,
+        mask_feat: Tensor<4>,
+        tracer: &mut Tracer<'_>,
+    ) {
+        let mut up = self.upsample(state.disp.clone(), mask_feat, tracer);
+        if itr == self.n - 1 {
+            let mono = state
+                .mono
+                .up
+                .clone()
+                .expect("the last iteration is a dual-branch one");
+            let [image1, image2] = self.images.clone();
+            let refined = span("remp", || {
+                self.blocks.remp.forward(mono, up.clone(), image1, image2)
+            });
+            tracer.emit("REMP", &refined);
+            up = up + refined; // quirk 4: disp_up + LeakyReLU(disp_up + residual)
+        }
+        if !self.test_mode {
+            state.disp_preds.push(up.clone());
+        }
+        state.disp_up = Some(up);
+    }
+
+    /// A 1/4 disparity upsampled to full resolution by the convex mask from `mask_feat`.
+    fn upsample(
+        &self,
+        disp: Tensor<4>,
+        mask_feat: Tensor<4>,
+        tracer: &mut Tracer<'_>,
+    ) -> Tensor<4> {
+        let up = span(UPSAMPLING, || {
+            upsample_disp(
+                self.blocks.spx_2_gru,
+                self.blocks.spx_gru,
+                disp,
+                mask_feat,
+                self.stem_2x.clone(),
+            )
+        });
+        tracer.emit("upsample_disp", &up);
+        up
     }
 }
