@@ -18,6 +18,9 @@ use burn::backend::{Autodiff, Backend};
 pub(crate) type TrackedOp<O, B, C, const N: usize> =
     OpsPrep<O, B, <O as Backward<B, N>>::State, C, N, Tracked>;
 
+/// Per parent of a backward step, its node's id where it takes a gradient.
+pub(crate) type ParentIds<const N: usize> = [Option<NodeId>; N];
+
 /// An operation's input tensor on the autodiff backend over `B`.
 pub(crate) type Tracking<B, C> = FloatTensor<Autodiff<B, C>>;
 
@@ -77,7 +80,7 @@ impl<B: Backend, O: Backward<B, N>, const N: usize> RecordOp<B, N> for O {}
 pub(crate) fn step_inputs<B: Backend, S, const N: usize>(
     ops: Ops<S, N>,
     grads: &mut Gradients,
-) -> (FloatTensor<B>, S, [Option<NodeId>; N]) {
+) -> (FloatTensor<B>, S, ParentIds<N>) {
     let grad = grads.consume::<B>(&ops.node);
     (grad, ops.state, ops.parents.map(|p| p.map(|node| node.id)))
 }
@@ -116,7 +119,7 @@ pub(crate) fn checkpointed_step_inputs<B: Backend, G, const N: usize>(
     ops: Ops<([NodeId; 2], G), N>,
     grads: &mut Gradients,
     checkpointer: &mut Checkpointer,
-) -> (FloatTensor<B>, [FloatTensor<B>; 2], G, [Option<NodeId>; N]) {
+) -> (FloatTensor<B>, [FloatTensor<B>; 2], G, ParentIds<N>) {
     let (grad, (ids, geometry), parents) = step_inputs::<B, _, N>(ops, grads);
     let saved = ids.map(|id| checkpointer.retrieve_node_output(id));
     (grad, saved, geometry, parents)
