@@ -288,24 +288,25 @@ impl Hourglass {
         let conv3 = self.conv3.1.forward(self.conv3.0.forward(conv2.clone()));
         let conv3 = self.feature_att_32.forward(conv3, features[3].clone());
 
-        let conv3_up = self.conv3_up.forward(conv3);
-        let conv2 = Tensor::cat(vec![conv3_up, conv2], 1);
-        let conv2 = self
-            .agg_0
-            .2
-            .forward(self.agg_0.1.forward(self.agg_0.0.forward(conv2)));
-        let conv2 = self.feature_att_up_16.forward(conv2, features[2].clone());
-
-        let conv2_up = self.conv2_up.forward(conv2);
-        let conv1 = Tensor::cat(vec![conv2_up, conv1], 1);
-        let conv1 = self
-            .agg_1
-            .2
-            .forward(self.agg_1.1.forward(self.agg_1.0.forward(conv1)));
-        let conv1 = self.feature_att_up_8.forward(conv1, features[1].clone());
-
+        let up = (&self.conv3_up, &self.agg_0, &self.feature_att_up_16);
+        let conv2 = up_and_merge(up, conv3, conv2, features[2].clone());
+        let up = (&self.conv2_up, &self.agg_1, &self.feature_att_up_8);
+        let conv1 = up_and_merge(up, conv2, conv1, features[1].clone());
         self.conv1_up.forward(conv1)
     }
+}
+
+/// One step up the hourglass: `x` upsampled by `up`, concatenated with the `skip` of the way
+/// down, aggregated by `agg` and weighted by `att` from the stereo `feature`.
+fn up_and_merge(
+    (up, agg, att): (&BasicDeconv3d, &Triple3d, &FeatureAtt),
+    x: Tensor<5>,
+    skip: Tensor<5>,
+    feature: Tensor<4>,
+) -> Tensor<5> {
+    let merged = Tensor::cat(vec![up.forward(x), skip], 1);
+    let merged = agg.2.forward(agg.1.forward(agg.0.forward(merged)));
+    att.forward(merged, feature)
 }
 
 /// Output of [`CostAggregation::forward`].

@@ -6,7 +6,7 @@
 #![allow(non_snake_case)]
 
 use burn::module::Module;
-use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
+use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d, Relu};
 use burn::tensor::module::adaptive_avg_pool2d;
 use burn::tensor::{Device, Tensor};
@@ -14,6 +14,7 @@ use burn::tensor::{Device, Tensor};
 use crate::activation::{leaky_relu, relu, sigmoid};
 use crate::conv::{conv2d_forward, conv2d_fused, conv_transpose2d_fused, Activation};
 
+use super::upsample::deconv_4x4_s2;
 use super::warp::disp_warp;
 
 #[allow(clippy::too_many_arguments)] // mirrors PyTorch's Conv2d signature, one call per layer
@@ -85,11 +86,7 @@ pub struct BasicDeconvNow {
 impl BasicDeconvNow {
     pub fn new(c_in: usize, c_out: usize, device: &Device) -> Self {
         Self {
-            conv: ConvTranspose2dConfig::new([c_in, c_out], [4, 4])
-                .with_stride([2, 2])
-                .with_padding([1, 1])
-                .with_bias(false)
-                .init(device),
+            conv: deconv_4x4_s2(c_in, c_out, device),
             bn: BatchNormConfig::new(c_out).init(device),
         }
     }
@@ -116,13 +113,7 @@ impl Conv2xNowUp {
     }
 
     pub fn forward(&self, x: Tensor<4>, rem: Tensor<4>) -> Tensor<4> {
-        let x = self.conv1.forward(x);
-        assert_eq!(
-            x.dims(),
-            rem.dims(),
-            "Conv2x_now: shapes differ (H, W must be multiples of 16)"
-        );
-        self.conv2.forward(Tensor::cat(vec![x, rem], 1))
+        merge_with_skip(&self.conv2, self.conv1.forward(x), rem)
     }
 }
 
@@ -143,14 +134,18 @@ impl Conv2xNowDown {
     }
 
     pub fn forward(&self, x: Tensor<4>, rem: Tensor<4>) -> Tensor<4> {
-        let x = self.conv1.forward(x);
-        assert_eq!(
-            x.dims(),
-            rem.dims(),
-            "Conv2x_now: shapes differ (H, W must be multiples of 16)"
-        );
-        self.conv2.forward(Tensor::cat(vec![x, rem], 1))
+        merge_with_skip(&self.conv2, self.conv1.forward(x), rem)
     }
+}
+
+/// `Conv2x_now`'s second half: `conv2(cat(x, rem))` of the resampled `x` and the skip `rem`.
+fn merge_with_skip(conv2: &BasicConvNow, x: Tensor<4>, rem: Tensor<4>) -> Tensor<4> {
+    assert_eq!(
+        x.dims(),
+        rem.dims(),
+        "Conv2x_now: shapes differ (H, W must be multiples of 16)"
+    );
+    conv2.forward(Tensor::cat(vec![x, rem], 1))
 }
 
 /// Upstream `Simple_UNet(C)`.

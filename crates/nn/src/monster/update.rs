@@ -569,26 +569,14 @@ pub fn iterate_traced(
     test_mode: bool,
     trace: &mut dyn FnMut(&str, &Tensor<4>),
 ) -> IterationOutput {
-    let IterationInputs {
-        geo,
-        init_disp,
-        disp_mono_4x,
-        net,
-        inp,
-        features_left0,
-        features_right0,
-        stem_2x,
-        image1,
-        image2,
-    } = inputs;
     let run = Loop {
         blocks,
-        geo,
-        inp,
-        features_left0,
-        features_right0,
-        stem_2x,
-        images: [image1, image2],
+        geo: inputs.geo,
+        inp: inputs.inp,
+        features_left0: inputs.features_left0,
+        features_right0: inputs.features_right0,
+        stem_2x: inputs.stem_2x,
+        images: [inputs.image1, inputs.image2],
         n: iters as i64,
         test_mode,
     };
@@ -596,12 +584,12 @@ pub fn iterate_traced(
         trace,
         counts: HashMap::new(),
     };
-    let mut net_stereo = net.clone();
+    let mut net_stereo = inputs.net.clone();
     let mut state = LoopState {
-        disp: init_disp,
+        disp: inputs.init_disp,
         mono: MonoBranch {
-            disp_4x: disp_mono_4x,
-            net,
+            disp_4x: inputs.disp_mono_4x,
+            net: inputs.net,
             up: None,
         },
         disp_up: None,

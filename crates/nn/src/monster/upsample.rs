@@ -37,6 +37,16 @@ impl BasicConv {
     }
 }
 
+/// The ×2 upsampling of upstream's `BasicConv(deconv=True)` blocks: ConvTranspose2d k4 s2 p1
+/// without bias.
+pub(super) fn deconv_4x4_s2(c_in: usize, c_out: usize, device: &Device) -> ConvTranspose2d {
+    ConvTranspose2dConfig::new([c_in, c_out], [4, 4])
+        .with_stride([2, 2])
+        .with_padding([1, 1])
+        .with_bias(false)
+        .init(device)
+}
+
 /// Upstream `BasicConv(deconv=True)`: ConvTranspose2d k4 s2 p1 (no bias) + BatchNorm2d + LeakyReLU(0.01).
 #[derive(Module, Debug)]
 pub struct BasicDeconv {
@@ -47,11 +57,7 @@ pub struct BasicDeconv {
 impl BasicDeconv {
     pub fn new(c_in: usize, c_out: usize, device: &Device) -> Self {
         Self {
-            conv: ConvTranspose2dConfig::new([c_in, c_out], [4, 4])
-                .with_stride([2, 2])
-                .with_padding([1, 1])
-                .with_bias(false)
-                .init(device),
+            conv: deconv_4x4_s2(c_in, c_out, device),
             bn: BatchNormConfig::new(c_out).init(device),
         }
     }
