@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use dataset::scores::count_errors;
 
 use crate::events::EventWriter;
-use crate::trainer::{StepRecord, ValidationRecord};
+use crate::loss::LossTerms;
 use crate::TrainError;
 
 /// Header of `metrics.csv`.
@@ -22,6 +22,38 @@ pub const METRICS_HEADER: &str =
 /// Header of `validation.csv`.
 pub const VALIDATION_HEADER: &str =
     "step,epe,bad_1px,bad_3px,pairs,epe_synchronic,epe_diachronic,seconds";
+
+/// One finished optimiser step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepRecord {
+    /// Steps done after this one (1-based).
+    pub step: usize,
+    /// Total steps of the run.
+    pub total_steps: usize,
+    /// Base learning rate of this step (`feat_decoder` used `lr × feat_decoder_lr_factor`).
+    pub lr: f64,
+    /// The loss terms (λ- and sequence-weighted, summed as the release logs them).
+    pub terms: LossTerms,
+    /// Global gradient norm before clipping (`NaN` when the step was skipped).
+    pub grad_norm: f64,
+    /// Factor applied by the clipping (1 = not clipped).
+    pub clip_factor: f64,
+    /// True when the gradients were not finite and the update was skipped.
+    pub skipped: bool,
+    /// Wall time of this step, seconds.
+    pub seconds: f64,
+    /// Steps per second averaged over this session.
+    pub its_per_s: f64,
+}
+
+/// One validation pass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValidationRecord {
+    /// Steps done when it ran.
+    pub step: usize,
+    pub scores: ValidationScores,
+    pub seconds: f64,
+}
 
 /// An append-only CSV log with a fixed header.
 pub struct CsvLog {

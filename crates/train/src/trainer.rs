@@ -16,45 +16,12 @@ use crate::checkpoint::{self, Checkpoint, CheckpointState};
 use crate::config::TrainConfig;
 use crate::data::{network_inputs, PreparedSample, TrainData, ValidData};
 use crate::loss::{sequence_loss, LossBatch, LossTerms};
-use crate::metrics::{
-    pair_scores, peak_rss_bytes, RunLogs, ValidationAccumulator, ValidationScores,
-};
+use crate::metrics::{pair_scores, peak_rss_bytes, RunLogs, ValidationAccumulator};
+pub use crate::metrics::{StepRecord, ValidationRecord, ValidationScores};
 use crate::optim::{assign_param_ids, param_ids, Optimizer};
 use crate::schedule::OneCycle;
-use crate::setup::build_model;
+use crate::setup::{build_model, InitReport};
 use crate::TrainError;
-
-/// One finished optimiser step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StepRecord {
-    /// Steps done after this one (1-based).
-    pub step: usize,
-    /// Total steps of the run.
-    pub total_steps: usize,
-    /// Base learning rate of this step (`feat_decoder` used `lr × feat_decoder_lr_factor`).
-    pub lr: f64,
-    /// The loss terms (λ- and sequence-weighted, summed as the release logs them).
-    pub terms: LossTerms,
-    /// Global gradient norm before clipping (`NaN` when the step was skipped).
-    pub grad_norm: f64,
-    /// Factor applied by the clipping (1 = not clipped).
-    pub clip_factor: f64,
-    /// True when the gradients were not finite and the update was skipped.
-    pub skipped: bool,
-    /// Wall time of this step, seconds.
-    pub seconds: f64,
-    /// Steps per second averaged over this session.
-    pub its_per_s: f64,
-}
-
-/// One validation pass.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ValidationRecord {
-    /// Steps done when it ran.
-    pub step: usize,
-    pub scores: ValidationScores,
-    pub seconds: f64,
-}
 
 /// Receives the progress of a run (the CLI draws a bar; tests collect the records).
 pub trait Observer {
@@ -157,13 +124,23 @@ pub struct Session {
 impl Session {
     /// A fresh session (new optimiser) for `config` on the autodiff `device`.
     pub fn new(config: &TrainConfig, device: &Device) -> Result<Self, TrainError> {
+        Self::with_state(config, device, Optimizer::new(&config.optim), None)
+    }
+
+    /// A session that continues with `optimizer` and the best validation EPE so far.
+    fn with_state(
+        config: &TrainConfig,
+        device: &Device,
+        optimizer: Optimizer,
+        best_epe: Option<f64>,
+    ) -> Result<Self, TrainError> {
         Ok(Self {
             config: config.clone(),
             device: device.clone(),
-            optimizer: Optimizer::new(&config.optim),
+            optimizer,
             schedule: OneCycle::new(config.optim.lr, config.run.steps, &config.schedule)
                 .map_err(|e| TrainError::Config(e.to_string()))?,
-            best_epe: None,
+            best_epe,
         })
     }
 
@@ -205,18 +182,68 @@ pub fn train(
         .as_deref()
         .map(Checkpoint::open)
         .transpose()?;
-
     let (model, init) = build_model(
         config,
         &device,
         resume.as_ref().map(|c| c.model_path()).as_deref(),
     )?;
-    let mut optimizer = Optimizer::new(&config.optim);
-    let (mut model, start_step, best_epe) = match &resume {
+    let (mut model, optimizer, start_step, best_epe) =
+        restore_state(model, config, resume.as_ref())?;
+    write_run_config(config)?;
+    let logs = RunLogs::open(output, resume.as_ref().map(|_| start_step))?;
+    let mut lines = setup_lines(&init, &base, &data, valid.as_ref(), config);
+    lines.extend(resume_line(resume.as_ref(), start_step));
+    observer.started(start_step, config.run.steps, &lines);
+
+    let mut run = Run {
+        config,
+        options,
+        base,
+        data,
+        valid,
+        logs,
+        session: Session::with_state(config, &device, optimizer, best_epe)?,
+        summary: TrainSummary::starting_at(start_step, config.run.steps),
+        start_step,
+        train_seconds: 0.0,
+    };
+    if config.run.validate_at_start && resume.is_none() {
+        run.summary.first_validation = run.validate(&model, start_step, observer)?;
+    }
+    for step in start_step..config.run.steps {
+        let (next, record) = run.step(model, step)?;
+        model = next;
+        observer.step(&record);
+        let done = record.step;
+        let stop_requested = run.stop_requested(done);
+        let last = done == config.run.steps;
+        if run.validation_due(done) || last {
+            run.validate_and_keep_best(&model, done, observer)?;
+        }
+        if done % config.run.checkpoint_every == 0 || last || stop_requested {
+            run.checkpoint(&model, done, record.lr, observer)?;
+        }
+        if stop_requested && !last {
+            run.summary.interrupted = true;
+            break;
+        }
+    }
+    run.finish(&model)
+}
+
+/// The model, optimiser, next step and best EPE to start from: the checkpoint's when resuming
+/// (which must match the configured seed and leave steps to do), otherwise fresh ones.
+fn restore_state(
+    model: Monster,
+    config: &TrainConfig,
+    resume: Option<&Checkpoint>,
+) -> Result<(Monster, Optimizer, usize, Option<f64>), TrainError> {
+    let optimizer = Optimizer::new(&config.optim);
+    let (model, optimizer, start_step, best_epe) = match resume {
         Some(ck) => {
             let model = assign_param_ids(model, &ck.state.param_ids)
                 .map_err(|e| TrainError::Checkpoint(format!("{}: {e}", ck.dir.display())))?;
-            optimizer = optimizer
+            let optimizer = optimizer
                 .load(&ck.optimizer_path())
                 .map_err(|e| TrainError::Checkpoint(e.to_string()))?;
             if ck.state.seed != config.run.seed {
@@ -227,9 +254,9 @@ pub fn train(
                     config.run.seed
                 )));
             }
-            (model, ck.state.step, ck.state.best_epe)
+            (model, optimizer, ck.state.step, ck.state.best_epe)
         }
-        None => (model, 0, None),
+        None => (model, optimizer, 0, None),
     };
     if start_step >= config.run.steps {
         return Err(TrainError::Config(format!(
@@ -237,16 +264,28 @@ pub fn train(
             config.run.steps
         )));
     }
+    Ok((model, optimizer, start_step, best_epe))
+}
 
-    let config_path = output.join("config.toml");
+/// Writes the effective configuration into the run folder, so a run can be read (and resumed)
+/// without the files and overrides it was started with.
+fn write_run_config(config: &TrainConfig) -> Result<(), TrainError> {
+    let config_path = config.run.output.join("config.toml");
     raster::formats::write_atomically(&config_path, |f| {
         use std::io::Write;
         f.write_all(config.to_toml().as_bytes())
     })
-    .map_err(|e| TrainError::Io(e.to_string()))?;
-    let resumed = resume.as_ref().map(|_| start_step);
-    let mut logs = RunLogs::open(output, resumed)?;
+    .map_err(|e| TrainError::Io(e.to_string()))
+}
 
+/// What the run starts with, in words: the weights loaded, device, parameters and data sizes.
+fn setup_lines(
+    init: &InitReport,
+    base: &Device,
+    data: &TrainData,
+    valid: Option<&ValidData>,
+    config: &TrainConfig,
+) -> Vec<String> {
     let mut lines = init.lines.clone();
     lines.push(format!("device: {base:?}"));
     lines.push(format!(
@@ -259,115 +298,153 @@ pub fn train(
         data.len(),
         data.batches_per_epoch(),
         config.run.batch_size,
-        valid.as_ref().map_or(0, |v| v.len())
+        valid.map_or(0, |v| v.len())
     ));
-    if let Some(ck) = &resume {
-        lines.push(format!(
-            "resumed from {} at step {start_step}",
-            ck.dir.display()
-        ));
-    }
-    observer.started(start_step, config.run.steps, &lines);
+    lines
+}
 
-    let schedule = OneCycle::new(config.optim.lr, config.run.steps, &config.schedule)
-        .map_err(|e| TrainError::Config(e.to_string()))?;
-    let mut session = Session {
-        config: config.clone(),
-        device,
-        optimizer,
-        schedule,
-        best_epe,
-    };
-    let mut summary = TrainSummary {
-        steps_done: start_step,
-        total_steps: config.run.steps,
-        interrupted: false,
-        first_loss: None,
-        last_loss: None,
-        first_validation: None,
-        last_validation: None,
-        losses: Vec::new(),
-        its_per_s: 0.0,
-        peak_rss_bytes: None,
-        checkpoint: None,
-    };
+/// The line saying which checkpoint the run resumes from, when it does.
+fn resume_line(resume: Option<&Checkpoint>, start_step: usize) -> Option<String> {
+    resume.map(|ck| format!("resumed from {} at step {start_step}", ck.dir.display()))
+}
 
-    if config.run.validate_at_start && resume.is_none() {
-        if let Some(v) = &valid {
-            let r = validate(&model, v, &base, config, start_step, observer)?;
-            logs.validation(&r)?;
-            summary.first_validation = r.as_ref().map(|r| r.scores);
+impl TrainSummary {
+    /// The summary of a session that has not stepped yet, `start_step` of `total_steps` done.
+    fn starting_at(start_step: usize, total_steps: usize) -> Self {
+        Self {
+            steps_done: start_step,
+            total_steps,
+            interrupted: false,
+            first_loss: None,
+            last_loss: None,
+            first_validation: None,
+            last_validation: None,
+            losses: Vec::new(),
+            its_per_s: 0.0,
+            peak_rss_bytes: None,
+            checkpoint: None,
         }
     }
+}
 
-    let mut train_seconds = 0.0;
-    for step in start_step..config.run.steps {
+/// A run in progress: what the loop carries from one step to the next.
+struct Run<'a> {
+    config: &'a TrainConfig,
+    options: &'a TrainOptions,
+    /// The device validation runs on (without autodiff).
+    base: Device,
+    data: TrainData,
+    valid: Option<ValidData>,
+    logs: RunLogs,
+    session: Session,
+    summary: TrainSummary,
+    start_step: usize,
+    /// Seconds spent in steps this session (validation and checkpoints excluded).
+    train_seconds: f64,
+}
+
+impl Run<'_> {
+    /// Trains 0-based step `step` and logs it; returns the updated model and the step's record.
+    fn step(&mut self, model: Monster, step: usize) -> Result<(Monster, StepRecord), TrainError> {
         let t0 = Instant::now();
-        let batch = data.batch(step)?;
-        let lr = session.schedule.lr(step);
-        let (next, terms, report) = train_step(&mut session, model, &batch, lr)?;
-        model = next;
+        let batch = self.data.batch(step)?;
+        let lr = self.session.schedule.lr(step);
+        let (model, terms, report) = train_step(&mut self.session, model, &batch, lr)?;
         let seconds = t0.elapsed().as_secs_f64();
-        train_seconds += seconds;
+        self.train_seconds += seconds;
         let done = step + 1;
-        let steps_here = done - start_step;
         let record = StepRecord {
             step: done,
-            total_steps: config.run.steps,
+            total_steps: self.config.run.steps,
             lr,
             terms,
             grad_norm: report.map_or(f64::NAN, |r| r.grad_norm),
             clip_factor: report.map_or(f64::NAN, |r| r.clip_factor),
             skipped: report.is_none(),
             seconds,
-            its_per_s: steps_here as f64 / train_seconds.max(1e-9),
+            its_per_s: (done - self.start_step) as f64 / self.train_seconds.max(1e-9),
         };
-        logs.step(&record)?;
-        observer.step(&record);
+        self.logs.step(&record)?;
+        let summary = &mut self.summary;
         summary.first_loss.get_or_insert(terms.total);
         summary.last_loss = Some(terms.total);
         summary.losses.push(terms);
         summary.steps_done = done;
         summary.its_per_s = record.its_per_s;
+        Ok((model, record))
+    }
 
-        let stop_requested = options
+    /// True when an interrupt was signalled or the `stop_after` step count is reached.
+    fn stop_requested(&self, done: usize) -> bool {
+        self.options
             .stop
             .as_ref()
             .is_some_and(|s| s.load(Ordering::SeqCst))
-            || options.stop_after.is_some_and(|n| done >= n);
-        let last = done == config.run.steps;
-        if config.run.validate_every > 0 && done % config.run.validate_every == 0 || last {
-            if let Some(v) = &valid {
-                let r = validate(&model, v, &base, config, done, observer)?;
-                logs.validation(&r)?;
-                if let Some(r) = r {
-                    summary.last_validation = Some(r.scores);
-                    if r.scores.epe.is_finite() && session.best_epe.is_none_or(|b| r.scores.epe < b)
-                    {
-                        session.best_epe = Some(r.scores.epe);
-                        let best = output.join("best.safetensors");
-                        save_model_atomically(&model, &best)?;
-                    }
-                }
-            }
-        }
-        if done % config.run.checkpoint_every == 0 || last || stop_requested {
-            let dir = save_checkpoint(&session, &model, done, lr)?;
-            checkpoint::prune(output, config.run.keep_checkpoints)?;
-            observer.checkpointed(&dir);
-            summary.checkpoint = Some(dir);
-        }
-        if stop_requested && !last {
-            summary.interrupted = true;
-            break;
-        }
+            || self.options.stop_after.is_some_and(|n| done >= n)
     }
-    if summary.steps_done == config.run.steps {
-        let final_path = output.join("final.safetensors");
-        save_model_atomically(&model, &final_path)?;
+
+    /// True when the configured validation period ends at `done` steps.
+    fn validation_due(&self, done: usize) -> bool {
+        let every = self.config.run.validate_every;
+        every > 0 && done.is_multiple_of(every)
     }
-    summary.peak_rss_bytes = peak_rss_bytes();
-    Ok(summary)
+
+    /// Validates (when there is validation data) and logs the pass; returns its scores.
+    fn validate(
+        &mut self,
+        model: &Monster,
+        done: usize,
+        observer: &mut dyn Observer,
+    ) -> Result<Option<ValidationScores>, TrainError> {
+        let Some(valid) = &self.valid else {
+            return Ok(None);
+        };
+        let record = validate(model, valid, &self.base, self.config, done, observer)?;
+        self.logs.validation(&record)?;
+        Ok(record.map(|r| r.scores))
+    }
+
+    /// Validates and saves `best.safetensors` when the EPE is the best of the run so far.
+    fn validate_and_keep_best(
+        &mut self,
+        model: &Monster,
+        done: usize,
+        observer: &mut dyn Observer,
+    ) -> Result<(), TrainError> {
+        let Some(scores) = self.validate(model, done, observer)? else {
+            return Ok(());
+        };
+        self.summary.last_validation = Some(scores);
+        if scores.epe.is_finite() && self.session.best_epe.is_none_or(|b| scores.epe < b) {
+            self.session.best_epe = Some(scores.epe);
+            save_model_atomically(model, &self.config.run.output.join("best.safetensors"))?;
+        }
+        Ok(())
+    }
+
+    /// Writes a checkpoint after `done` steps and prunes the old ones.
+    fn checkpoint(
+        &mut self,
+        model: &Monster,
+        done: usize,
+        lr: f64,
+        observer: &mut dyn Observer,
+    ) -> Result<(), TrainError> {
+        let dir = save_checkpoint(&self.session, model, done, lr)?;
+        checkpoint::prune(&self.config.run.output, self.config.run.keep_checkpoints)?;
+        observer.checkpointed(&dir);
+        self.summary.checkpoint = Some(dir);
+        Ok(())
+    }
+
+    /// Saves `final.safetensors` when every step is done and closes the summary.
+    fn finish(mut self, model: &Monster) -> Result<TrainSummary, TrainError> {
+        if self.summary.steps_done == self.config.run.steps {
+            save_model_atomically(model, &self.config.run.output.join("final.safetensors"))?;
+        }
+        self.summary.peak_rss_bytes = peak_rss_bytes();
+        Ok(self.summary)
+    }
 }
 
 /// One optimiser step on `batch` at learning rate `lr`.

@@ -1,7 +1,7 @@
 //! The per-prediction multi-term loss (paper eq. 4) and the sequence loss over MonSter++'s
 //! predictions (eq. 3), as the release's `self_supervised_sequence_loss` combines them.
 
-use burn::tensor::{Bool, Tensor, TensorData};
+use burn::tensor::{Bool, Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 use super::batch::{bool_tensor, LossBatch};
@@ -64,12 +64,8 @@ pub fn prediction_loss(
     } else {
         Vec::new()
     };
-    let visible: Option<Tensor<4, Bool>> = if config.occlusion_in_all_terms {
-        let mut all = Vec::with_capacity(b * h * w);
-        for chunk in values.chunks_exact(h * w) {
-            all.extend(zbuffer_visible(chunk, w).map_err(mask_error)?);
-        }
-        Some(bool_tensor(&all, [b, 1, h, w], &device))
+    let visible = if config.occlusion_in_all_terms {
+        Some(visibility(&values, [b, h, w], &device)?)
     } else {
         None
     };
@@ -79,60 +75,18 @@ pub fn prediction_loss(
     if let Some(v) = &visible {
         disp_keep = disp_keep.bool_and(v.clone());
     }
-
     let disp = if config.lambda_disp > 0.0 {
-        let map = disparity_error_map(
-            prediction.clone(),
-            batch.target.clone(),
-            config.disparity_penalty,
-        );
-        masked_mean(map, disp_keep.clone()).mul_scalar(config.lambda_disp)
+        disparity_term(config, batch, &prediction, &disp_keep)
     } else {
         zero()
     };
-
     let photo = if config.uses_photometric() {
-        let mut keep = Vec::with_capacity(b * h * w);
-        let sup = batch.supervision();
-        let building = batch.building();
-        for i in 0..b {
-            let range = i * h * w..(i + 1) * h * w;
-            let building = config
-                .photometric_on_buildings_only
-                .then(|| &building[range.clone()]);
-            keep.extend(
-                photometric_mask(&sup[range.clone()], &values[range], w, building)
-                    .map_err(mask_error)?,
-            );
-        }
-        let map = photometric_error_map(
-            batch.real_left.clone(),
-            batch.real_right.clone(),
-            prediction.clone(),
-            config.ssim_alpha,
-            config.ssim_window,
-        );
-        masked_mean(map, bool_tensor(&keep, [b, 1, h, w], &device)).mul_scalar(config.lambda_photo)
+        photometric_term(config, batch, &prediction, &values)?
     } else {
         zero()
     };
-
     let smooth = if config.lambda_smooth > 0.0 {
-        let keep = (config.smooth_over_valid || visible.is_some()).then(|| {
-            let k = if config.smooth_over_valid {
-                disp_keep.clone()
-            } else {
-                visible.clone().expect("checked")
-            };
-            pair_masks(k, [b, h, w])
-        });
-        smoothness_term(
-            prediction.clone(),
-            batch.input_left.clone(),
-            config.smooth_normalise_by_mean,
-            keep,
-        )
-        .mul_scalar(config.lambda_smooth)
+        smooth_term(config, batch, &prediction, &disp_keep, visible.as_ref())
     } else {
         zero()
     };
@@ -143,6 +97,94 @@ pub fn prediction_loss(
         photo,
         smooth,
     })
+}
+
+/// Z-buffer visibility of each prediction of the batch (`values`, `[B, H, W]` row-major): what
+/// `occlusion_in_all_terms` removes from every term.
+fn visibility(
+    values: &[f32],
+    [b, h, w]: [usize; 3],
+    device: &Device,
+) -> Result<Tensor<4, Bool>, LossError> {
+    let mut all = Vec::with_capacity(b * h * w);
+    for chunk in values.chunks_exact(h * w) {
+        all.extend(zbuffer_visible(chunk, w).map_err(mask_error)?);
+    }
+    Ok(bool_tensor(&all, [b, 1, h, w], device))
+}
+
+/// `λ_disp·L_disp`: the disparity penalty against the target, averaged over `keep`.
+fn disparity_term(
+    config: &LossConfig,
+    batch: &LossBatch,
+    prediction: &Tensor<4>,
+    keep: &Tensor<4, Bool>,
+) -> Tensor<1> {
+    let map = disparity_error_map(
+        prediction.clone(),
+        batch.target.clone(),
+        config.disparity_penalty,
+    );
+    masked_mean(map, keep.clone()).mul_scalar(config.lambda_disp)
+}
+
+/// `λ_photo·L_photo`: the SSIM/L1 error of the warped real right view, averaged over each
+/// sample's photometric mask (built on the detached prediction `values`).
+fn photometric_term(
+    config: &LossConfig,
+    batch: &LossBatch,
+    prediction: &Tensor<4>,
+    values: &[f32],
+) -> Result<Tensor<1>, LossError> {
+    let [b, h, w] = batch.dims();
+    let mut keep = Vec::with_capacity(b * h * w);
+    let sup = batch.supervision();
+    let building = batch.building();
+    for i in 0..b {
+        let range = i * h * w..(i + 1) * h * w;
+        let building = config
+            .photometric_on_buildings_only
+            .then(|| &building[range.clone()]);
+        keep.extend(
+            photometric_mask(&sup[range.clone()], &values[range], w, building)
+                .map_err(mask_error)?,
+        );
+    }
+    let map = photometric_error_map(
+        batch.real_left.clone(),
+        batch.real_right.clone(),
+        prediction.clone(),
+        config.ssim_alpha,
+        config.ssim_window,
+    );
+    let keep = bool_tensor(&keep, [b, 1, h, w], &prediction.device());
+    Ok(masked_mean(map, keep).mul_scalar(config.lambda_photo))
+}
+
+/// `λ_smooth·L_smooth`: edge-aware smoothness over every pixel pair, or only the pairs inside
+/// the disparity mask (`smooth_over_valid`) or the z-buffer visibility.
+fn smooth_term(
+    config: &LossConfig,
+    batch: &LossBatch,
+    prediction: &Tensor<4>,
+    disp_keep: &Tensor<4, Bool>,
+    visible: Option<&Tensor<4, Bool>>,
+) -> Tensor<1> {
+    let keep = (config.smooth_over_valid || visible.is_some()).then(|| {
+        let k = if config.smooth_over_valid {
+            disp_keep.clone()
+        } else {
+            visible.expect("checked").clone()
+        };
+        pair_masks(k, batch.dims())
+    });
+    smoothness_term(
+        prediction.clone(),
+        batch.input_left.clone(),
+        config.smooth_normalise_by_mean,
+        keep,
+    )
+    .mul_scalar(config.lambda_smooth)
 }
 
 /// Pixel pairs `(x, x+1)` and `(y, y+1)` that both pass `keep`.
