@@ -110,7 +110,6 @@ pub struct ReconstructArgs {
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tile, a.collar, a.output.clone());
-    a.guard_output()?;
     let s = reconstruct(&a.options()?, progress)?;
     println!("{}", tiles_line(&s, tile, collar));
     for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
@@ -132,20 +131,6 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     println!("{}", dsm_line(&s, dsm, &output));
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
-    }
-    let failed: Vec<String> = s
-        .records
-        .iter()
-        .filter(|r| r.status == TileStatus::Failed)
-        .map(|r| r.tile.id.clone())
-        .collect();
-    if !failed.is_empty() {
-        return Err(crate::exit::partial(
-            "tiles",
-            s.records.len(),
-            failed,
-            "rerun the same command to retry them",
-        ));
     }
     Ok(())
 }
@@ -190,26 +175,6 @@ impl ReconstructArgs {
 }
 
 impl ReconstructArgs {
-    /// Refuses a DSM path that is an input, or an existing DSM that is not this work folder's
-    /// (without --overwrite).
-    fn guard_output(&self) -> Result<()> {
-        let work = self
-            .work
-            .clone()
-            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output));
-        let inputs = [
-            Some(&self.left),
-            Some(&self.right),
-            self.rpc_left.as_ref(),
-            self.rpc_right.as_ref(),
-            self.like.as_ref(),
-            self.truth.as_ref(),
-        ];
-        let inputs: Vec<&std::path::Path> =
-            inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-        crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
-    }
-
     /// The scores need the truth's grid: `--truth` must be the `--like` DSM.
     fn check_truth(&self) -> Result<()> {
         if let (Some(t), Some(l)) = (&self.truth, &self.like) {

@@ -62,15 +62,6 @@ fn parse_zone(s: &str) -> Result<camera::UtmZone, String> {
 }
 
 pub fn run(a: ScoreArgs) -> Result<()> {
-    if let Some(j) = &a.json {
-        let inputs: Vec<&std::path::Path> = a
-            .dsm
-            .iter()
-            .map(|p| p.as_path())
-            .chain([a.truth.as_path()])
-            .collect();
-        crate::exit::guard_output("--json", j, &inputs)?;
-    }
     let zone = match a.utm_zone {
         Some(z) => z,
         None => camera::DsmGrid::read(&a.dsm[0], None)

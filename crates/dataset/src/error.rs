@@ -18,12 +18,11 @@ pub enum DatasetError {
     #[error("{0}")]
     Invalid(String),
     /// Any other I/O error, with its file.
-    // The I/O error is in the message, not also a `source`: an anyhow chain (`{:#}`) would
-    // print it twice.
-    #[error("{}: {error}", path.display())]
+    #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
-        error: std::io::Error,
+        #[source]
+        source: std::io::Error,
     },
 }
 
@@ -45,7 +44,7 @@ impl DatasetError {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Self::Io {
             path: path.into(),
-            error: source,
+            source,
         }
     }
 }

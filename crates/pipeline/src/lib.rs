@@ -14,7 +14,6 @@ pub mod dsm;
 pub mod eval;
 pub mod matcher;
 pub mod metrics;
-pub mod outputs;
 pub mod pairs;
 pub mod predict;
 pub mod progress;

@@ -15,7 +15,6 @@ pub mod folder;
 pub mod mosaic;
 pub mod plan;
 pub mod raw;
-pub mod sanity;
 pub mod tile;
 pub mod workers;
 
@@ -207,7 +206,6 @@ pub fn reconstruct(
         .work_dir
         .clone()
         .unwrap_or_else(|| default_work_dir(&opts.output));
-    sanity::check_outputs(opts, &work)?;
     let pair = open_pair(opts)?;
     let (w, h) = pair.left.size();
     let roi = region_of_interest(opts, &pair.rpc_left, pair.alt_range, (w, h))?;
@@ -252,9 +250,6 @@ pub fn reconstruct(
             );
         }
         return Ok(summary);
-    }
-    if summary.count(TileStatus::Done) == 0 {
-        return Err(sanity::nothing_produced(&summary.records).into());
     }
     let t = Instant::now();
     summary.dsm = Some(merge_tiles(opts, &grid, &folder, &summary.records)?);
@@ -302,7 +297,6 @@ fn open_pair(opts: &ReconstructOptions) -> Result<OpenPair> {
         "right",
     )?;
     let (alt_range, alt_source) = altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
-    sanity::check_pair(opts, (&left, &right), (&rpc_left, &rpc_right), alt_range)?;
     Ok(OpenPair {
         left,
         right,
@@ -498,7 +492,7 @@ fn check_tile_memory(
         bail!(
             "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
              --max-memory {:.2} GiB: use a smaller --tile (now {} px) or a narrower \
-             --alt-range ({})",
+             --alt-range (disparity range {:?} px)",
             gib(largest),
             gib(PROCESS_BYTES),
             gib(opts.max_memory),
@@ -508,10 +502,6 @@ fn check_tile_memory(
                 .zip(memory)
                 .max_by_key(|(_, m)| **m)
                 .and_then(|(r, _)| r.as_ref().ok().map(|r| r.disparity_range))
-                .map_or("disparity range unknown".into(), |(lo, hi)| format!(
-                    "disparity range {lo}:{hi} px; a range this wide usually means an RPC that is \
-                     not its image's: check --rpc-left and --rpc-right"
-                ))
         );
     }
     Ok(largest)
@@ -548,12 +538,8 @@ fn merge_tiles(
     let dsm = mosaic.into_image(grid);
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
     let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
-    write_dsm(&opts.output, &dsm, grid).map_err(|e| crate::outputs::Incomplete::Nothing {
-        message: format!(
-            "writing the DSM failed: {e}; the tiles stay in the work folder: free space or fix \
-             the folder and rerun the same command"
-        ),
-    })?;
+    write_dsm(&opts.output, &dsm, grid)
+        .with_context(|| format!("writing {}", opts.output.display()))?;
     Ok(DsmSummary {
         points,
         measured_cells,
