@@ -172,9 +172,7 @@ impl ReconstructArgs {
             keep_intermediates: self.keep_intermediates,
         })
     }
-}
 
-impl ReconstructArgs {
     /// The scores need the truth's grid: `--truth` must be the `--like` DSM.
     fn check_truth(&self) -> Result<()> {
         if let (Some(t), Some(l)) = (&self.truth, &self.like) {
