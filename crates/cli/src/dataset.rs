@@ -166,6 +166,7 @@ pub fn run(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
         DatasetCommand::Build(b) => {
             let s = run_build(&b.options()?, progress)?;
             print_build(&b.split, &s, &b.output);
+            failed_pairs(&s)?;
         }
         DatasetCommand::World(w) => {
             let s = build_world_training(&w.options()?, progress)?;
@@ -173,6 +174,24 @@ pub fn run(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Exit code 2 when some pairs failed (each named with its error).
+fn failed_pairs(s: &BuildSummary) -> Result<()> {
+    for (pair, cause) in &s.failed {
+        eprintln!("warning: pair {pair} failed: {cause}");
+    }
+    if s.failed.is_empty() {
+        return Ok(());
+    }
+    let names = s.failed.iter().map(|(p, _)| p.clone()).collect();
+    let total = s.pairs_in_shard;
+    Err(crate::exit::partial(
+        "pairs",
+        total,
+        names,
+        "fix them and rerun the same command",
+    ))
 }
 
 impl BuildArgs {

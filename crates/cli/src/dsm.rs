@@ -61,6 +61,11 @@ fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
 }
 
 pub fn run(a: DsmArgs) -> Result<()> {
+    crate::exit::guard_output(
+        "-o",
+        &a.output,
+        &[&a.disparity, &a.homography, &a.rpc_left, &a.rpc_right],
+    )?;
     let grid = match a.like {
         Some(path) => GridChoice::Like(path),
         None => GridChoice::Resolution {

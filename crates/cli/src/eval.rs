@@ -110,7 +110,20 @@ pub fn run(a: EvalArgs, progress: &dyn Progress) -> Result<()> {
         "{} pairs scored, {} already scored (skipped), {} dropped (Omaha disparity > {}); per pair: {}; table: {}",
         r.scored, r.skipped, r.dropped, opts.omaha_max_disparity, r.csv.display(), r.markdown.display()
     );
-    Ok(())
+    for (pair, cause) in &r.failed {
+        eprintln!("warning: pair {pair} failed: {cause}");
+    }
+    if r.failed.is_empty() {
+        return Ok(());
+    }
+    let total = r.scored + r.skipped + r.dropped + r.failed.len();
+    let names = r.failed.iter().map(|(p, _)| p.clone()).collect();
+    Err(crate::exit::partial(
+        "pairs",
+        total,
+        names,
+        "fix them and rerun: scored pairs are skipped",
+    ))
 }
 
 impl EvalArgs {

@@ -15,6 +15,7 @@ mod dataset;
 mod demo;
 mod dsm;
 mod eval;
+mod exit;
 mod masks;
 mod predict;
 mod reconstruct;
@@ -39,11 +40,19 @@ use clap::{Parser, Subcommand};
         Conventions: pairs are rectified (epipolar lines are rows); disparity lives on the left view, \
         x_R = x_L − d, positive and growing with altitude; invalid pixels are NaN.\n\n\
         Start with `seasonstereo demo`: it renders a procedural satellite world with exact ground truth, \
-        matches it and writes an HTML report."
+        matches it and writes an HTML report.",
+    after_help = exit::EXIT_CODES_HELP
 )]
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Replace existing final outputs (DSMs, disparities, reports), atomically; work folders
+    /// resume whatever this says.
+    #[arg(long, global = true)]
+    overwrite: bool,
+    /// Exit 0 with a warning, instead of 2, when some tiles or items failed.
+    #[arg(long, global = true)]
+    allow_partial: bool,
 }
 
 #[derive(Subcommand)]
@@ -111,13 +120,15 @@ const PURGE_DELAY_MS: std::ffi::c_long = -1;
 fn main() -> ExitCode {
     // SAFETY: sets a plain integer option of the allocator, before any thread is started.
     unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, PURGE_DELAY_MS) };
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return exit::parse_error(e),
+    };
+    exit::set(exit::Safety {
+        overwrite: cli.overwrite,
+        allow_partial: cli.allow_partial,
+    });
+    exit::exit_code(run(cli))
 }
 
 fn run(cli: Cli) -> Result<()> {

@@ -44,6 +44,9 @@ pub struct PredictArgs {
 
 pub fn run(a: PredictArgs, progress: &dyn Progress) -> Result<()> {
     let matcher = a.matcher.matcher()?;
+    for out in std::iter::once(&a.output).chain(&a.color) {
+        crate::exit::guard_output("-o", out, &[&a.left, &a.right])?;
+    }
     let (left, right) = read_pair(&a.left, &a.right)?;
     let range = RangeSource::flag_or_estimate(a.range);
     let matched = predict(&left, &right, &matcher, range, progress)?;

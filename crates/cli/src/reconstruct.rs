@@ -110,15 +110,11 @@ pub struct ReconstructArgs {
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tile, a.collar, a.output.clone());
+    let cameras = a.camera_names();
+    a.guard_output()?;
     let s = reconstruct(&a.options()?, progress)?;
     println!("{}", tiles_line(&s, tile, collar));
-    for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
-        eprintln!(
-            "warning: tile {} failed (rerun the same command to retry it): {}",
-            r.tile.id,
-            r.error.as_deref().unwrap_or("?")
-        );
-    }
+    print_warnings(&s, &cameras);
     let Some(dsm) = &s.dsm else {
         println!(
             "{} tiles belong to other shards and are not finished (first: {}); the DSM is written \
@@ -132,7 +128,40 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
-    Ok(())
+    failed_tiles(&s)
+}
+
+/// The failed tiles, one warning each, and cameras that do not fit their images.
+fn print_warnings(s: &ReconstructSummary, cameras: &[String; 2]) {
+    for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
+        eprintln!(
+            "warning: tile {} failed (rerun the same command to retry it): {}",
+            r.tile.id,
+            r.error.as_deref().unwrap_or("no message")
+        );
+    }
+    if let Some(w) = s.parallax_warning([&cameras[0], &cameras[1]]) {
+        eprintln!("warning: {w}");
+    }
+}
+
+/// Exit code 2 when some tiles failed (the DSM holds the others).
+fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
+    let failed: Vec<String> = s
+        .records
+        .iter()
+        .filter(|r| r.status == TileStatus::Failed)
+        .map(|r| r.tile.id.clone())
+        .collect();
+    if failed.is_empty() {
+        return Ok(());
+    }
+    Err(crate::exit::partial(
+        "tiles",
+        s.records.len(),
+        failed,
+        "rerun the same command to retry them",
+    ))
 }
 
 impl ReconstructArgs {
@@ -171,6 +200,38 @@ impl ReconstructArgs {
             merge_only: self.merge,
             keep_intermediates: self.keep_intermediates,
         })
+    }
+
+    /// Refuses a DSM path that is an input, or an existing DSM that is not this work folder's
+    /// (without --overwrite).
+    fn guard_output(&self) -> Result<()> {
+        let work = self
+            .work
+            .clone()
+            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output));
+        let inputs = [
+            Some(&self.left),
+            Some(&self.right),
+            self.rpc_left.as_ref(),
+            self.rpc_right.as_ref(),
+            self.like.as_ref(),
+            self.truth.as_ref(),
+        ];
+        let inputs: Vec<&std::path::Path> =
+            inputs.into_iter().flatten().map(|p| p.as_path()).collect();
+        crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
+    }
+
+    /// How the cameras are named in warnings: the JSON files, or the images' RPC tags.
+    fn camera_names(&self) -> [String; 2] {
+        let name = |rpc: &Option<PathBuf>, image: &PathBuf| match rpc {
+            Some(p) => p.display().to_string(),
+            None => format!("the RPC tag of {}", image.display()),
+        };
+        [
+            name(&self.rpc_left, &self.left),
+            name(&self.rpc_right, &self.right),
+        ]
     }
 
     /// The scores need the truth's grid: `--truth` must be the `--like` DSM.

@@ -45,6 +45,14 @@ pub struct RectifyArgs {
 }
 
 pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
+    let inputs = [
+        Some(&a.left),
+        Some(&a.right),
+        a.rpc_left.as_ref(),
+        a.rpc_right.as_ref(),
+    ];
+    let inputs: Vec<&std::path::Path> = inputs.into_iter().flatten().map(|p| p.as_path()).collect();
+    pipeline::outputs::check_output_folder("-o", &a.output, &inputs, false)?;
     let opts = pipeline::rectify::RectifyOptions {
         left: a.left,
         right: a.right,

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use seasonstereo::{read_truth, score, DsmScores};
 
@@ -61,18 +61,35 @@ fn parse_zone(s: &str) -> Result<camera::UtmZone, String> {
     camera::UtmZone::new(zone, north).map_err(|e| e.to_string())
 }
 
+/// The truth's UTM zone: `--utm-zone`, else the first DSM's.
+fn utm_zone(a: &ScoreArgs) -> Result<camera::UtmZone> {
+    if let Some(z) = a.utm_zone {
+        return Ok(z);
+    }
+    let dsm = &a.dsm[0];
+    if !dsm.is_file() {
+        bail!("{}: no such file", dsm.display());
+    }
+    let grid = camera::DsmGrid::read(dsm, None).with_context(|| {
+        format!(
+            "{}: cannot take the UTM zone from this DSM; give --utm-zone",
+            dsm.display()
+        )
+    })?;
+    Ok(grid.zone())
+}
+
 pub fn run(a: ScoreArgs) -> Result<()> {
-    let zone = match a.utm_zone {
-        Some(z) => z,
-        None => camera::DsmGrid::read(&a.dsm[0], None)
-            .with_context(|| {
-                format!(
-                    "{}: cannot take the UTM zone from this DSM; give --utm-zone",
-                    a.dsm[0].display()
-                )
-            })?
-            .zone(),
-    };
+    if let Some(j) = &a.json {
+        let inputs: Vec<&std::path::Path> = a
+            .dsm
+            .iter()
+            .map(|p| p.as_path())
+            .chain([a.truth.as_path()])
+            .collect();
+        crate::exit::guard_output("--json", j, &inputs)?;
+    }
+    let zone = utm_zone(&a)?;
     let truth = read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {

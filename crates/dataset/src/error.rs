@@ -18,11 +18,12 @@ pub enum DatasetError {
     #[error("{0}")]
     Invalid(String),
     /// Any other I/O error, with its file.
-    #[error("{}: {source}", path.display())]
+    // The I/O error is in the message, not also a `source`: an anyhow chain (`{:#}`) would
+    // print it twice.
+    #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -44,7 +45,7 @@ impl DatasetError {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Self::Io {
             path: path.into(),
-            source,
+            error: source,
         }
     }
 }

@@ -44,6 +44,7 @@ pub mod census;
 mod cost;
 mod error;
 mod mgm;
+pub mod parallax;
 mod range;
 mod select;
 mod sgm;
@@ -51,6 +52,7 @@ pub mod speckle;
 
 pub use census::CensusWindow;
 pub use error::MatchError;
+pub use parallax::{vertical_parallax, Parallax};
 pub use range::estimate_range;
 pub use sgm::{
     disparity_count, match_pair, match_pair_with_progress, memory_bytes, Aggregation,

@@ -14,6 +14,7 @@ pub mod dsm;
 pub mod eval;
 pub mod matcher;
 pub mod metrics;
+pub mod outputs;
 pub mod pairs;
 pub mod predict;
 pub mod progress;

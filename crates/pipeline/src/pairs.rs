@@ -78,6 +78,12 @@ impl PairFolder {
     }
 
     fn left_images(&self) -> Result<Vec<(String, PathBuf)>> {
+        if !self.root.is_dir() {
+            anyhow::bail!(
+                "{}: no such folder (a pair folder holds L/<stem>.iio and R/<stem>.iio)",
+                self.root.display()
+            );
+        }
         image_stems(&self.root.join("L")).with_context(|| {
             format!(
                 "{} is not a pair folder: expected L/<stem>.iio and R/<stem>.iio inside",

@@ -15,6 +15,7 @@ pub mod folder;
 pub mod mosaic;
 pub mod plan;
 pub mod raw;
+pub mod sanity;
 pub mod tile;
 pub mod workers;
 
@@ -168,7 +169,36 @@ impl ReconstructSummary {
         let m: Vec<f64> = self.records.iter().filter_map(|r| r.matched).collect();
         (!m.is_empty()).then(|| m.iter().sum::<f64>() / m.len() as f64)
     }
+
+    /// Median over the tiles of their residual vertical parallax, pixels.
+    pub fn vertical_parallax(&self) -> Option<f32> {
+        let mut v: Vec<f32> = self
+            .records
+            .iter()
+            .filter_map(|r| r.vertical_parallax)
+            .collect();
+        v.sort_by(f32::total_cmp);
+        v.get(v.len() / 2).copied()
+    }
+
+    /// A warning when the rectified views disagree by rows, as they do when an RPC is not its
+    /// image's (swapped cameras, another acquisition's bundle adjustment): `cameras` names them.
+    pub fn parallax_warning(&self, cameras: [&str; 2]) -> Option<String> {
+        let rows = self.vertical_parallax()?;
+        (rows > MAX_VERTICAL_PARALLAX).then(|| {
+            format!(
+                "the rectified views disagree by {rows:.0} px across the epipolar lines (median \
+                 over the tiles; under 1 px when each camera is its image's): check that {} \
+                 belongs to the left image and {} to the right one (swapped?)",
+                cameras[0], cameras[1]
+            )
+        })
+    }
 }
+
+/// Residual vertical parallax above which the cameras are suspect, pixels (s2p corrects up to a
+/// few pixels of pointing error; bundle-adjusted RPCs leave a fraction of a pixel).
+pub const MAX_VERTICAL_PARALLAX: f32 = 3.0;
 
 /// The default work folder of an output DSM: `out/dsm.tif` → `out/dsm_work`.
 pub fn default_work_dir(output: &Path) -> PathBuf {
@@ -206,6 +236,7 @@ pub fn reconstruct(
         .work_dir
         .clone()
         .unwrap_or_else(|| default_work_dir(&opts.output));
+    sanity::check_outputs(opts, &work)?;
     let pair = open_pair(opts)?;
     let (w, h) = pair.left.size();
     let roi = region_of_interest(opts, &pair.rpc_left, pair.alt_range, (w, h))?;
@@ -221,7 +252,17 @@ pub fn reconstruct(
     } else {
         let t = Instant::now();
         let scene = pair.scene(opts, &grid, &work, &stem, tiles.len() == 1);
-        let run = run_tiles(opts, &scene, &tiles, &folder, progress)?;
+        // Work has begun: a failure now (a full disk) leaves no DSM, and finished tiles.
+        let run = run_tiles(opts, &scene, &tiles, &folder, progress).map_err(|e| {
+            crate::outputs::Incomplete::Nothing {
+                message: format!(
+                    "no DSM written: {}; the finished tiles stay in {}: fix the cause and rerun \
+                     the same command",
+                    crate::outputs::one_line(&e),
+                    work.display()
+                ),
+            }
+        })?;
         seconds.push(("tiles", t.elapsed().as_secs_f64()));
         run
     };
@@ -250,6 +291,9 @@ pub fn reconstruct(
             );
         }
         return Ok(summary);
+    }
+    if summary.count(TileStatus::Done) == 0 {
+        return Err(sanity::nothing_produced(&summary.records).into());
     }
     let t = Instant::now();
     summary.dsm = Some(merge_tiles(opts, &grid, &folder, &summary.records)?);
@@ -297,6 +341,7 @@ fn open_pair(opts: &ReconstructOptions) -> Result<OpenPair> {
         "right",
     )?;
     let (alt_range, alt_source) = altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
+    sanity::check_pair(opts, (&left, &right), (&rpc_left, &rpc_right), alt_range)?;
     Ok(OpenPair {
         left,
         right,
@@ -492,7 +537,7 @@ fn check_tile_memory(
         bail!(
             "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
              --max-memory {:.2} GiB: use a smaller --tile (now {} px) or a narrower \
-             --alt-range (disparity range {:?} px)",
+             --alt-range ({})",
             gib(largest),
             gib(PROCESS_BYTES),
             gib(opts.max_memory),
@@ -502,6 +547,10 @@ fn check_tile_memory(
                 .zip(memory)
                 .max_by_key(|(_, m)| **m)
                 .and_then(|(r, _)| r.as_ref().ok().map(|r| r.disparity_range))
+                .map_or("disparity range unknown".into(), |(lo, hi)| format!(
+                    "disparity range {lo}:{hi} px; a range this wide usually means an RPC that is \
+                     not its image's: check --rpc-left and --rpc-right"
+                ))
         );
     }
     Ok(largest)
@@ -538,8 +587,12 @@ fn merge_tiles(
     let dsm = mosaic.into_image(grid);
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
     let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
-    write_dsm(&opts.output, &dsm, grid)
-        .with_context(|| format!("writing {}", opts.output.display()))?;
+    write_dsm(&opts.output, &dsm, grid).map_err(|e| crate::outputs::Incomplete::Nothing {
+        message: format!(
+            "writing the DSM failed: {e}; the tiles stay in the work folder: free space or fix \
+             the folder and rerun the same command"
+        ),
+    })?;
     Ok(DsmSummary {
         points,
         measured_cells,

@@ -4,11 +4,12 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum RasterError {
     /// The file could not be opened, read or written.
-    #[error("{}: {source}", path.display())]
+    // The I/O error is in the message, not also a `source`: an anyhow chain (`{:#}`) would
+    // print it twice.
+    #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file exists but its content is not what the format or the caller requires.
     #[error("{}: {message}", path.display())]
@@ -31,7 +32,7 @@ impl RasterError {
     pub fn io(path: &Path, source: std::io::Error) -> Self {
         Self::Io {
             path: path.to_path_buf(),
-            source,
+            error: source,
         }
     }
 }

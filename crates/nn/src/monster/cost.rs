@@ -31,7 +31,7 @@ use crate::conv::{
 };
 
 use super::features::{
-    conv2d, conv_in_block, conv_in_block_forward, instance_norm, BasicConvIn, ConvInBlock,
+    conv2d, conv_in_block, conv_in_block_forward, instance_norm, BasicConvIn, ConvInBlock, Window,
     LEAKY_SLOPE,
 };
 
@@ -103,16 +103,9 @@ pub struct BasicConv2d {
 }
 
 impl BasicConv2d {
-    pub fn new(
-        c_in: usize,
-        c_out: usize,
-        k: usize,
-        stride: usize,
-        pad: usize,
-        device: &Device,
-    ) -> Self {
+    pub fn new(c_in: usize, c_out: usize, window: Window, device: &Device) -> Self {
         Self {
-            conv: conv2d(c_in, c_out, k, stride, pad, false, device),
+            conv: window.conv2d(c_in, c_out, false, device),
             bn: bn(c_out, device),
         }
     }
@@ -135,14 +128,12 @@ pub struct BasicConv3d {
 }
 
 impl BasicConv3d {
-    pub fn new(
-        c_in: usize,
-        c_out: usize,
-        k: usize,
-        stride: usize,
-        pad: usize,
-        device: &Device,
-    ) -> Self {
+    pub fn new(c_in: usize, c_out: usize, window: Window, device: &Device) -> Self {
+        let Window {
+            size: k,
+            stride,
+            pad,
+        } = window;
         let conv = Conv3dConfig::new([c_in, c_out], [k, k, k])
             .with_stride([stride, stride, stride])
             .with_padding(PaddingConfig3d::Explicit(pad, pad, pad))
@@ -208,7 +199,7 @@ impl FeatureAtt {
     pub fn new(cv_c: usize, feat_c: usize, device: &Device) -> Self {
         Self {
             feat_att: (
-                BasicConv2d::new(feat_c, feat_c / 2, 1, 1, 0, device),
+                BasicConv2d::new(feat_c, feat_c / 2, Window::new(1, 1, 0), device),
                 conv2d(feat_c / 2, cv_c, 1, 1, 0, true, device),
             ),
         }
@@ -245,16 +236,16 @@ pub struct Hourglass {
 
 fn pair3d(c_in: usize, c_out: usize, device: &Device) -> Pair3d {
     (
-        BasicConv3d::new(c_in, c_out, 3, 2, 1, device),
-        BasicConv3d::new(c_out, c_out, 3, 1, 1, device),
+        BasicConv3d::new(c_in, c_out, Window::new(3, 2, 1), device),
+        BasicConv3d::new(c_out, c_out, Window::new(3, 1, 1), device),
     )
 }
 
 fn triple3d(c_in: usize, c_out: usize, device: &Device) -> Triple3d {
     (
-        BasicConv3d::new(c_in, c_out, 1, 1, 0, device),
-        BasicConv3d::new(c_out, c_out, 3, 1, 1, device),
-        BasicConv3d::new(c_out, c_out, 3, 1, 1, device),
+        BasicConv3d::new(c_in, c_out, Window::new(1, 1, 0), device),
+        BasicConv3d::new(c_out, c_out, Window::new(3, 1, 1), device),
+        BasicConv3d::new(c_out, c_out, Window::new(3, 1, 1), device),
     )
 }
 
@@ -335,7 +326,7 @@ pub struct CostAggregation {
 impl CostAggregation {
     pub fn new(device: &Device) -> Self {
         Self {
-            corr_stem: BasicConv3d::new(GWC_GROUPS, GWC_GROUPS, 3, 1, 1, device),
+            corr_stem: BasicConv3d::new(GWC_GROUPS, GWC_GROUPS, Window::new(3, 1, 1), device),
             corr_feature_att: FeatureAtt::new(GWC_GROUPS, 96, device),
             cost_agg: Hourglass::new(GWC_GROUPS, device),
             classifier: Conv3dConfig::new([GWC_GROUPS, 1], [3, 3, 3])
@@ -414,7 +405,7 @@ impl Conv2xIn {
     pub fn new(c_in: usize, c_out: usize, device: &Device) -> Self {
         Self {
             conv1: BasicDeconvIn::new(c_in, c_out, device),
-            conv2: BasicConvIn::new(2 * c_out, 2 * c_out, 3, 1, 1, device),
+            conv2: BasicConvIn::new(2 * c_out, 2 * c_out, Window::new(3, 1, 1), device),
         }
     }
 

@@ -40,6 +40,26 @@ pub fn instance_norm<const D: usize>(x: Tensor<D>) -> Tensor<D> {
 }
 
 /// Conv2d with symmetric padding, optional bias.
+/// A convolution's square window: kernel size, stride and zero padding (upstream
+/// `BasicConv`'s arguments after the channels).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    pub size: usize,
+    pub stride: usize,
+    pub pad: usize,
+}
+
+impl Window {
+    pub const fn new(size: usize, stride: usize, pad: usize) -> Self {
+        Self { size, stride, pad }
+    }
+
+    /// A 2-D convolution over this window.
+    pub fn conv2d(self, c_in: usize, c_out: usize, bias: bool, device: &Device) -> Conv2d {
+        conv2d(c_in, c_out, self.size, self.stride, self.pad, bias, device)
+    }
+}
+
 pub(crate) fn conv2d(
     c_in: usize,
     c_out: usize,
@@ -63,16 +83,9 @@ pub struct BasicConvIn {
 }
 
 impl BasicConvIn {
-    pub fn new(
-        c_in: usize,
-        c_out: usize,
-        k: usize,
-        stride: usize,
-        pad: usize,
-        device: &Device,
-    ) -> Self {
+    pub fn new(c_in: usize, c_out: usize, window: Window, device: &Device) -> Self {
         Self {
-            conv: conv2d(c_in, c_out, k, stride, pad, false, device),
+            conv: window.conv2d(c_in, c_out, false, device),
         }
     }
 
@@ -89,7 +102,7 @@ pub type ConvInBlock = (BasicConvIn, Conv2d);
 /// Builds a [`ConvInBlock`].
 pub fn conv_in_block(c_in: usize, c_out: usize, stride: usize, device: &Device) -> ConvInBlock {
     (
-        BasicConvIn::new(c_in, c_out, 3, stride, 1, device),
+        BasicConvIn::new(c_in, c_out, Window::new(3, stride, 1), device),
         conv2d(c_out, c_out, 3, 1, 1, false, device),
     )
 }
@@ -200,7 +213,7 @@ impl StereoFeatures {
             stem_4: conv_in_block(32, 48, 2, device),
             stem_8: conv_in_block(48, 96, 2, device),
             stem_16: conv_in_block(96, 192, 2, device),
-            conv: BasicConvIn::new(96, 96, 3, 1, 1, device),
+            conv: BasicConvIn::new(96, 96, Window::new(3, 1, 1), device),
             desc: conv2d(96, 96, 1, 1, 0, true, device),
         }
     }

@@ -387,28 +387,67 @@ fn mask_feat_init(hidden: usize, device: &Device) -> (Conv2d, Relu) {
     (conv(hidden, 32, 3, device), Relu::new())
 }
 
-/// Upstream `BasicMultiUpdateBlock` (n_gru_layers = 3, all hidden dims equal to `hidden`).
-#[derive(Module, Debug)]
-pub struct BasicMultiUpdateBlock {
-    pub encoder: BasicMotionEncoder,
-    pub gru04: ConvGru,
-    pub gru08: ConvGru,
-    pub gru16: ConvGru,
-    pub disp_head: DispHead,
-    pub mask_feat_4: (Conv2d, Relu),
+/// Defines an update block around the motion encoder `$encoder` (the one part that differs
+/// between the plain and the dual-branch block): three ConvGRU levels, the disparity head and the
+/// mask features, with upstream's keys `encoder`, `gru04`, `gru08`, `gru16`, `disp_head`,
+/// `mask_feat_4`.
+macro_rules! update_block {
+    ($(#[$doc:meta])* $name:ident, $encoder:ty) => {
+        $(#[$doc])*
+        #[derive(Module, Debug)]
+        pub struct $name {
+            pub encoder: $encoder,
+            pub gru04: ConvGru,
+            pub gru08: ConvGru,
+            pub gru16: ConvGru,
+            pub disp_head: DispHead,
+            pub mask_feat_4: (Conv2d, Relu),
+        }
+
+        impl $name {
+            /// The block around `encoder`; every level's hidden state has `hidden` channels.
+            fn with_encoder(encoder: $encoder, hidden: usize, device: &Device) -> Self {
+                Self {
+                    encoder,
+                    gru04: ConvGru::new(hidden, 128 + hidden, device),
+                    gru08: ConvGru::new(hidden, 2 * hidden, device),
+                    gru16: ConvGru::new(hidden, hidden, device),
+                    disp_head: DispHead::new(hidden, device),
+                    mask_feat_4: mask_feat_init(hidden, device),
+                }
+            }
+
+            /// The GRU levels coarse to fine (`motion` feeds the finest), then the heads.
+            fn update(
+                &self,
+                net: [Tensor<4>; 3],
+                inp: &[GruContext; 3],
+                motion: impl FnOnce() -> Tensor<4>,
+            ) -> UpdateOut {
+                let net = gru_steps(&self.gru16, &self.gru08, &self.gru04, net, inp, motion);
+                let delta = self.disp_head.forward(net[0].clone());
+                let mask_feat =
+                    conv2d_fused(&self.mask_feat_4.0, None, Activation::Relu, net[0].clone());
+                UpdateOut {
+                    net,
+                    mask_feat,
+                    delta,
+                }
+            }
+        }
+    };
 }
+
+update_block!(
+    /// Upstream `BasicMultiUpdateBlock` (n_gru_layers = 3, all hidden dims equal to `hidden`).
+    BasicMultiUpdateBlock,
+    BasicMotionEncoder
+);
 
 impl BasicMultiUpdateBlock {
     /// `cor_planes` = levels·(2r+1)·9 (162 for MonSter).
     pub fn new(hidden: usize, cor_planes: usize, device: &Device) -> Self {
-        Self {
-            encoder: BasicMotionEncoder::new(cor_planes, device),
-            gru04: ConvGru::new(hidden, 128 + hidden, device),
-            gru08: ConvGru::new(hidden, 2 * hidden, device),
-            gru16: ConvGru::new(hidden, hidden, device),
-            disp_head: DispHead::new(hidden, device),
-            mask_feat_4: mask_feat_init(hidden, device),
-        }
+        Self::with_encoder(BasicMotionEncoder::new(cor_planes, device), hidden, device)
     }
 
     /// `net` = `[h4, h8, h16]`, `corr` = geo lookup at `disp`.
@@ -419,41 +458,21 @@ impl BasicMultiUpdateBlock {
         corr: Tensor<4>,
         disp: Tensor<4>,
     ) -> UpdateOut {
-        let net = gru_steps(&self.gru16, &self.gru08, &self.gru04, net, inp, || {
-            self.encoder.forward(disp, corr)
-        });
-        let delta = self.disp_head.forward(net[0].clone());
-        let mask_feat = conv2d_fused(&self.mask_feat_4.0, None, Activation::Relu, net[0].clone());
-        UpdateOut {
-            net,
-            mask_feat,
-            delta,
-        }
+        self.update(net, inp, || self.encoder.forward(disp, corr))
     }
 }
 
-/// Upstream `BasicMultiUpdateBlock_mix2` (the dual-branch block; one instance per branch).
-#[derive(Module, Debug)]
-pub struct BasicMultiUpdateBlockMix2 {
-    pub encoder: BasicMotionEncoderMix2,
-    pub gru04: ConvGru,
-    pub gru08: ConvGru,
-    pub gru16: ConvGru,
-    pub disp_head: DispHead,
-    pub mask_feat_4: (Conv2d, Relu),
-}
+update_block!(
+    /// Upstream `BasicMultiUpdateBlock_mix2` (the dual-branch block; one instance per branch).
+    BasicMultiUpdateBlockMix2,
+    BasicMotionEncoderMix2
+);
 
 impl BasicMultiUpdateBlockMix2 {
     /// `cor_planes` = 162, `flaw_planes` = 96 (channels of `features_left[0]`).
     pub fn new(hidden: usize, cor_planes: usize, flaw_planes: usize, device: &Device) -> Self {
-        Self {
-            encoder: BasicMotionEncoderMix2::new(cor_planes, flaw_planes, device),
-            gru04: ConvGru::new(hidden, 128 + hidden, device),
-            gru08: ConvGru::new(hidden, 2 * hidden, device),
-            gru16: ConvGru::new(hidden, hidden, device),
-            disp_head: DispHead::new(hidden, device),
-            mask_feat_4: mask_feat_init(hidden, device),
-        }
+        let encoder = BasicMotionEncoderMix2::new(cor_planes, flaw_planes, device);
+        Self::with_encoder(encoder, hidden, device)
     }
 
     /// `own`: this instance's branch (stereo for `update_block_mix_stereo`, mono for
@@ -465,16 +484,7 @@ impl BasicMultiUpdateBlockMix2 {
         own: &Branch,
         other: &Branch,
     ) -> UpdateOut {
-        let net = gru_steps(&self.gru16, &self.gru08, &self.gru04, net, inp, || {
-            self.encoder.forward(own, other)
-        });
-        let delta = self.disp_head.forward(net[0].clone());
-        let mask_feat = conv2d_fused(&self.mask_feat_4.0, None, Activation::Relu, net[0].clone());
-        UpdateOut {
-            net,
-            mask_feat,
-            delta,
-        }
+        self.update(net, inp, || self.encoder.forward(own, other))
     }
 }
 

@@ -9,7 +9,7 @@ use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor};
 
-use nn::monster::features::BasicConvIn;
+use nn::monster::features::{BasicConvIn, Window};
 use nn::monster::geometry::GeoEncodingVolume;
 use nn::monster::remp::Remp;
 use nn::monster::update::{
@@ -86,7 +86,10 @@ impl Parts {
             spx_gru: load(spx_gru_init(device), "spx_gru."),
             remp: load(Remp::new(device), "REMP."),
             zqr: load(zqr, "context_zqr_convs."),
-            conv: load(BasicConvIn::new(96, 96, 3, 1, 1, device), "conv."),
+            conv: load(
+                BasicConvIn::new(96, 96, Window::new(3, 1, 1), device),
+                "conv.",
+            ),
             desc: load(Conv2dConfig::new([96, 96], [1, 1]).init(device), "desc."),
         }
     }

@@ -21,7 +21,7 @@ mod summary;
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use dataset::subset::Subset;
 
 use super::laps::Laps;
@@ -185,7 +185,11 @@ fn evaluate_methods(
         );
         e.method_name = name;
         e.save_dsm = true;
-        report = Some(evaluate(&e, progress)?);
+        let r = evaluate(&e, progress)?;
+        if let Some((pair, cause)) = r.failed.first() {
+            bail!("evaluating the held-out pair {pair}: {cause}");
+        }
+        report = Some(r);
     }
     Ok(report.expect("three methods were evaluated"))
 }

@@ -184,6 +184,9 @@ pub struct EvalReport {
     pub table: Table,
     pub csv: PathBuf,
     pub markdown: PathBuf,
+    /// Pairs that could not be scored (`split/stem`, the error as one line): the table holds
+    /// the others, and a rerun retries only these.
+    pub failed: Vec<(String, String)>,
 }
 
 /// The ground truth of one AOI, read once for all its pairs.
@@ -249,6 +252,7 @@ pub fn evaluate(opts: &EvalOptions, progress: &dyn Progress) -> Result<EvalRepor
     let csv = opts.out_dir.join(PAIRS_CSV);
     let mut file = RecordFile::open(&csv)?;
     let (mut scored, mut skipped, mut dropped) = (0, 0, 0);
+    let mut failed: Vec<(String, String)> = Vec::new();
     let mut truth: Option<Truth> = None;
     for split in &opts.splits {
         let mut stems = split.stems()?;
@@ -262,8 +266,15 @@ pub fn evaluate(opts: &EvalOptions, progress: &dyn Progress) -> Result<EvalRepor
                 progress.advance(i + 1);
                 continue;
             }
-            let record = evaluate_pair(opts, split, stem, &mut truth)
-                .with_context(|| format!("split {:?}, pair {stem}", split.name))?;
+            let record = match evaluate_pair(opts, split, stem, &mut truth) {
+                Ok(record) => record,
+                Err(e) => {
+                    let name = format!("{}/{stem}", split.name);
+                    failed.push((name, crate::outputs::one_line(&e)));
+                    progress.advance(i + 1);
+                    continue;
+                }
+            };
             if record.status == records::STATUS_DROPPED {
                 dropped += 1;
             } else {
@@ -273,6 +284,15 @@ pub fn evaluate(opts: &EvalOptions, progress: &dyn Progress) -> Result<EvalRepor
             progress.advance(i + 1);
         }
         progress.end();
+    }
+    if let (Some((first, cause)), 0) = (failed.first(), scored + skipped + dropped) {
+        return Err(crate::outputs::Incomplete::Nothing {
+            message: format!(
+                "no pair scored: all {} failed; first, {first}: {cause}",
+                failed.len()
+            ),
+        }
+        .into());
     }
     let records = file.rows().to_vec();
     let table = aggregate(&records);
@@ -288,6 +308,7 @@ pub fn evaluate(opts: &EvalOptions, progress: &dyn Progress) -> Result<EvalRepor
         table,
         csv,
         markdown,
+        failed,
     })
 }
 

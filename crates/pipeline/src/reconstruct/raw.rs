@@ -31,7 +31,7 @@ fn is_tiff(path: &Path) -> bool {
 impl RawImage {
     /// Opens the `which` ("left"/"right") image.
     pub fn open(path: &Path, which: &str) -> Result<Self> {
-        let context = || format!("reading the {which} image {}", path.display());
+        let context = || format!("reading the {which} image");
         if !is_tiff(path) {
             let image = raster::read_image(path).with_context(context)?;
             return Ok(RawImage {

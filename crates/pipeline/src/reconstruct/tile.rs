@@ -72,6 +72,10 @@ pub struct TileRecord {
     pub rectified_size: Option<(usize, usize)>,
     /// Share of the rectified left pixels with a disparity.
     pub matched: Option<f64>,
+    /// Median row offset of the right view's matches of textured left patches, pixels
+    /// ([`matching::vertical_parallax`]): under a pixel when each RPC belongs to its image.
+    #[serde(default)]
+    pub vertical_parallax: Option<f32>,
     /// Points triangulated from its core.
     pub points: usize,
     /// Estimated peak memory, bytes.
@@ -91,6 +95,7 @@ impl TileRecord {
             disparity_range: None,
             rectified_size: None,
             matched: None,
+            vertical_parallax: None,
             points: 0,
             memory_bytes,
             cells: None,
@@ -202,6 +207,8 @@ fn match_and_grid(
     let Some(right) = warp_window(scene.right, &rect.h_right, bounds, size)? else {
         return Ok(None);
     };
+    record.vertical_parallax =
+        matching::vertical_parallax(&left, &right, rect.disparity_range).map(|p| p.median_rows);
 
     let disparity = scene
         .matcher

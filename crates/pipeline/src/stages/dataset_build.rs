@@ -156,6 +156,8 @@ pub struct BuildSummary {
     pub missing_masks: usize,
     /// Rows of each subset list (when finalized).
     pub subsets: Vec<(String, KindCounts)>,
+    /// Pairs that failed in this run (name, the error as one line); a rerun retries them.
+    pub failed: Vec<(String, String)>,
 }
 
 /// The record of a finished pair (`<split>/.build/<pair>.json`).
@@ -249,22 +251,36 @@ pub fn run_build(opts: &BuildOptions, progress: &dyn Progress) -> Result<BuildSu
         } else if budget == Some(0) {
             break;
         } else {
-            let finished = build_pair(
+            match build_pair(
                 opts,
                 &layout,
                 synthetic.as_ref(),
                 pair,
                 &mut summary,
                 &mut budget,
-            )
-            .with_context(|| format!("pair {pair}"))?;
-            if finished {
-                summary.pairs_done += 1;
+            ) {
+                Ok(true) => summary.pairs_done += 1,
+                Ok(false) => {}
+                Err(e) => summary
+                    .failed
+                    .push((pair.to_string(), crate::outputs::one_line(&e))),
             }
         }
         progress.advance(k + 1);
     }
     progress.end();
+    if let (Some((pair, cause)), 0) = (
+        summary.failed.first(),
+        summary.pairs_done + summary.pairs_skipped,
+    ) {
+        return Err(crate::outputs::Incomplete::Nothing {
+            message: format!(
+                "no pair built: all {} failed; first, pair {pair}: {cause}",
+                summary.failed.len()
+            ),
+        }
+        .into());
+    }
 
     let records: Vec<Option<PairRecord>> = pairs
         .iter()
