@@ -60,20 +60,34 @@ fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
     crate::args::parse_box(s, "XMIN,YMIN,XMAX,YMAX")
 }
 
+impl DsmArgs {
+    /// Refuses a DSM path that is one of the inputs, or an existing DSM without --overwrite.
+    fn guard_output(&self) -> Result<()> {
+        let inputs = [
+            &self.disparity,
+            &self.homography,
+            &self.rpc_left,
+            &self.rpc_right,
+        ];
+        crate::exit::guard_output("-o", &self.output, &inputs.map(|p| p.as_path()))
+    }
+
+    /// The DSM's grid: a reference DSM's, or a UTM grid of the given resolution.
+    fn grid(&self) -> GridChoice {
+        match &self.like {
+            Some(path) => GridChoice::Like(path.clone()),
+            None => GridChoice::Resolution {
+                resolution: self.resolution,
+                bounds: self.bounds,
+                epsg: self.epsg,
+            },
+        }
+    }
+}
+
 pub fn run(a: DsmArgs) -> Result<()> {
-    crate::exit::guard_output(
-        "-o",
-        &a.output,
-        &[&a.disparity, &a.homography, &a.rpc_left, &a.rpc_right],
-    )?;
-    let grid = match a.like {
-        Some(path) => GridChoice::Like(path),
-        None => GridChoice::Resolution {
-            resolution: a.resolution,
-            bounds: a.bounds,
-            epsg: a.epsg,
-        },
-    };
+    a.guard_output()?;
+    let grid = a.grid();
     let s = disparity_to_dsm(&DsmOptions {
         disparity: a.disparity,
         homography: a.homography,

@@ -44,7 +44,8 @@ pub struct RectifyArgs {
     stem: Option<String>,
 }
 
-pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
+/// Refuses an output folder that is one of the inputs or cannot be written.
+fn guard_output(a: &RectifyArgs) -> Result<()> {
     let inputs = [
         Some(&a.left),
         Some(&a.right),
@@ -52,7 +53,11 @@ pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
         a.rpc_right.as_ref(),
     ];
     let inputs: Vec<&std::path::Path> = inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-    pipeline::outputs::check_output_folder("-o", &a.output, &inputs, false)?;
+    pipeline::outputs::check_output_folder("-o", &a.output, &inputs, false)
+}
+
+pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
+    guard_output(&a)?;
     let opts = pipeline::rectify::RectifyOptions {
         left: a.left,
         right: a.right,

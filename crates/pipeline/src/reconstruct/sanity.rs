@@ -7,8 +7,8 @@ use std::path::Path;
 use anyhow::{bail, Result};
 use camera::RpcModel;
 
+use super::options::ReconstructOptions;
 use super::raw::RawImage;
-use super::ReconstructOptions;
 use crate::outputs::same_file;
 
 /// The side of the central windows compared to tell identical images.
