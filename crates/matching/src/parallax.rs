@@ -12,11 +12,19 @@ const HALF: usize = 5;
 pub const MAX_ROWS: usize = 24;
 /// Candidate patches per side of the sampling grid.
 const GRID: usize = 8;
-/// A match counts when its correlation reaches this.
-const MIN_NCC: f32 = 0.8;
-/// A match must beat every row more than `PEAK_ROWS` away by this much correlation.
-const MIN_MARGIN: f32 = 0.1;
-const PEAK_ROWS: usize = 2;
+/// When a patch's best match counts: its correlation reaches `ncc` and beats every row more
+/// than `peak_rows` away by `margin`.
+struct Acceptance {
+    ncc: f32,
+    margin: f32,
+    peak_rows: usize,
+}
+
+const ACCEPT: Acceptance = Acceptance {
+    ncc: 0.8,
+    margin: 0.1,
+    peak_rows: 2,
+};
 /// Too few matched patches measure nothing.
 const MIN_POINTS: usize = 8;
 
@@ -103,7 +111,7 @@ fn patch(grey: &Image, x: usize, y: usize) -> impl Iterator<Item = f32> + '_ {
 
 /// The row offset of the right patch that best correlates with the left one at `(x, y)`, over
 /// the disparity range and ±[`MAX_ROWS`]; `None` when the best is weak, on the search's edge, or
-/// not clearly above the best of the rows more than [`PEAK_ROWS`] away (a repeated or changed
+/// not clearly above the best of the rows further away ([`ACCEPT`]) (a repeated or changed
 /// texture: cross-season pairs have many of those).
 fn best_row_offset(
     l: &Image,
@@ -150,11 +158,11 @@ fn best_row_offset(
     let elsewhere = by_row
         .iter()
         .enumerate()
-        .filter(|(i, _)| i.abs_diff(k) > PEAK_ROWS)
+        .filter(|(i, _)| i.abs_diff(k) > ACCEPT.peak_rows)
         .map(|(_, &v)| v)
         .fold(f32::NEG_INFINITY, f32::max);
     let dy = k as i32 - MAX_ROWS as i32;
-    let clear = best >= MIN_NCC && best - elsewhere >= MIN_MARGIN;
+    let clear = best >= ACCEPT.ncc && best - elsewhere >= ACCEPT.margin;
     (clear && dy.unsigned_abs() < MAX_ROWS as u32).then_some(dy)
 }
 
