@@ -18,6 +18,7 @@ mod eval;
 mod masks;
 mod predict;
 mod reconstruct;
+mod reconstruct_many;
 mod rectify;
 mod score;
 mod synthesize;
@@ -59,6 +60,11 @@ enum Command {
     /// From a raw pair to a DSM in one command: rectify from the RPCs, match over the range the
     /// cameras imply, triangulate and grid (optionally scored against a ground truth).
     Reconstruct(reconstruct::ReconstructArgs),
+    /// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence,
+    /// incidence and sun angles, each reconstructed on one grid, fused per cell (strongest height
+    /// cluster), holes filled only where no pair measured; count and spread rasters, a report.
+    /// Exit 2 when some pairs failed, 3 when none produced a DSM.
+    ReconstructMany(reconstruct_many::ReconstructManyArgs),
     /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).
     Score(score::ScoreArgs),
     /// Time the networks (MonSter++, SegFormer, DINOv3, a training step) with random weights:
@@ -111,8 +117,21 @@ const PURGE_DELAY_MS: std::ffi::c_long = -1;
 fn main() -> ExitCode {
     // SAFETY: sets a plain integer option of the allocator, before any thread is started.
     unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, PURGE_DELAY_MS) };
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
+    // A malformed command line exits 1 like any error before work (clap's own 2 would read as
+    // "partial"); help and version exit 0.
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
+    match run(cli) {
+        Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
@@ -120,9 +139,10 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli) -> Result<ExitCode> {
     let progress = bars::Bars::default();
     match cli.command {
+        Command::ReconstructMany(a) => return reconstruct_many::run(a, &progress),
         Command::World(a) => world::run(a, &progress),
         Command::Rectify(a) => rectify::run(a, &progress),
         Command::Predict(a) => predict::run(a, &progress),
@@ -139,7 +159,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Train(a) => train::run(a),
         Command::Demo(a) => demo::run(a, &progress),
         Command::Eval(a) => eval::run(a, &progress),
-    }
+    }?;
+    Ok(ExitCode::SUCCESS)
 }
 
 #[cfg(test)]
