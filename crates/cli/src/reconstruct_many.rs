@@ -51,9 +51,15 @@ pub struct ReconstructManyArgs {
     /// Heights of one cell further apart than this, metres, are different surfaces.
     #[arg(long, value_name = "M", default_value_t = FusionParams::default().tolerance)]
     cluster_tolerance: f32,
-    /// Fewest pairs that must agree (within the tolerance) for a cell to keep a measured height.
-    #[arg(long, value_name = "N", default_value_t = FusionParams::default().min_support)]
-    min_support: usize,
+    /// Fewest pairs that must agree (within the tolerance) for a cell to keep a measured height;
+    /// other cells are filled like unmeasured ones. Default: 2, a quarter of the pairs from 12
+    /// pairs on, at most the number of pairs.
+    #[arg(long, value_name = "N")]
+    min_support: Option<usize>,
+    /// Register each pair's DSM on the first pair's (integer NCC shift and vertical offset)
+    /// before fusing; off by default (it did not help on the dev set, BENCHMARKS.md).
+    #[arg(long)]
+    register: bool,
     /// Fill the fused DSM's holes (cells no pair measured) enclosed by data within this many
     /// cells; 0 leaves them empty.
     #[arg(long, value_name = "CELLS", default_value_t = 40)]
@@ -165,10 +171,9 @@ impl ReconstructManyArgs {
         o.work_dir = self.work;
         o.pairs = self.pairs;
         o.dry_run = self.dry_run;
-        o.fusion = FusionParams {
-            tolerance: self.cluster_tolerance,
-            min_support: self.min_support,
-        };
+        o.cluster_tolerance = self.cluster_tolerance;
+        o.min_support = self.min_support;
+        o.co_register = self.register;
         o.fill_holes = (self.fill_holes > 0).then_some(self.fill_holes);
         o.median_filter = on(self.median_filter);
         o.pair_median_filter = on(self.pair_median_filter);

@@ -57,8 +57,8 @@ pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
 pub use pipeline::reconstruct::fuse::FusionParams;
 pub use pipeline::reconstruct::many::{
-    FusedOutcome, PairOutcome, PairStatus, ReconstructManyOptions, ReconstructManySummary,
-    DEFAULT_PAIRS,
+    auto_min_support, FusedOutcome, PairOutcome, PairStatus, ReconstructManyOptions,
+    ReconstructManySummary, DEFAULT_PAIRS,
 };
 pub use pipeline::reconstruct::select::{PairChoice, PairTerms, View};
 pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};

@@ -8,6 +8,11 @@
 //! A cell whose strongest cluster has fewer members than `min_support` stays empty, like a cell
 //! no pair measured, and is left to the hole filling.
 //!
+//! Before fusing, each pair's DSM is co-registered on a reference pair's ([`Shift`]: an integer
+//! shift by NCC and a vertical offset, the benchmark's registration between two DSMs, no truth
+//! involved): the RPCs of different pairs disagree by a cell or two and tens of centimetres,
+//! which would otherwise blur every edge and split the clusters.
+//!
 //! Memory: the pairs' DSMs are read by windows of `rows_per_block` rows ([`fuse_files`]); only
 //! one block of every pair and the fused grid are held at once.
 
@@ -157,10 +162,51 @@ pub fn fuse_block(layers: &[Vec<f32>], cells: usize, p: &FusionParams) -> Fused 
     out
 }
 
-/// Fuses the single-band DSMs at `paths`, all on `grid`, reading `rows_per_block` rows of each
-/// at a time.
+/// How a pair's DSM is moved onto the reference: `out(x, y) = dsm(x − dx, y − dy) + offset`
+/// (as [`crate::eval::align::apply`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Shift {
+    pub dx: i32,
+    pub dy: i32,
+    pub offset: f32,
+}
+
+/// Rows `y0..y0 + n` of the `w`-wide DSM of `reader` moved by `s`, NaN where they fall outside.
+fn read_shifted(
+    reader: &mut TiffReader,
+    (w, h): (usize, usize),
+    y0: usize,
+    n: usize,
+    s: Shift,
+) -> Result<Vec<f32>> {
+    let mut out = vec![f32::NAN; w * n];
+    let (dx, dy) = (s.dx as i64, s.dy as i64);
+    let rows = (y0 as i64 - dy).max(0)..(y0 as i64 + n as i64 - dy).min(h as i64);
+    let cols = (-dx).max(0)..(w as i64 - dx).min(w as i64);
+    if rows.is_empty() || cols.is_empty() {
+        return Ok(out);
+    }
+    let (sw, sh) = (
+        (cols.end - cols.start) as usize,
+        (rows.end - rows.start) as usize,
+    );
+    let window = reader.read_window(cols.start as usize, rows.start as usize, sw, sh)?;
+    let src = window.data();
+    for r in 0..sh {
+        let y = (rows.start + r as i64 + dy) as usize - y0;
+        let x = (cols.start + dx) as usize;
+        let dst = &mut out[y * w + x..y * w + x + sw];
+        for (d, v) in dst.iter_mut().zip(&src[r * sw..(r + 1) * sw]) {
+            *d = v + s.offset;
+        }
+    }
+    Ok(out)
+}
+
+/// Fuses the single-band DSMs at `paths`, all on `grid`, each moved by its shift, reading
+/// `rows_per_block` rows of each at a time.
 pub fn fuse_files(
-    paths: &[PathBuf],
+    paths: &[(PathBuf, Shift)],
     grid: &DsmGrid,
     rows_per_block: usize,
     p: &FusionParams,
@@ -168,7 +214,7 @@ pub fn fuse_files(
 ) -> Result<Fused> {
     let (w, h) = (grid.width, grid.height);
     let mut readers = Vec::with_capacity(paths.len());
-    for path in paths {
+    for (path, _) in paths {
         let r = TiffReader::open(path).with_context(|| format!("opening {}", path.display()))?;
         if r.size() != (w, h) || r.bands() != 1 {
             bail!(
@@ -191,9 +237,8 @@ pub fn fuse_files(
         let layers: Vec<Vec<f32>> = readers
             .iter_mut()
             .zip(paths)
-            .map(|(r, path)| {
-                r.read_window(0, y0, w, n)
-                    .map(|img| img.data().to_vec())
+            .map(|(r, (path, shift))| {
+                read_shifted(r, (w, h), y0, n, *shift)
                     .with_context(|| format!("reading rows {y0}.. of {}", path.display()))
             })
             .collect::<Result<_>>()?;
@@ -282,6 +327,8 @@ mod tests {
         }
         let p = FusionParams::default();
         let whole = fuse_block(&layers, 63, &p);
+        let paths: Vec<(PathBuf, Shift)> =
+            paths.into_iter().map(|p| (p, Shift::default())).collect();
         for rows in [1, 2, 4, 9, 100] {
             let f = fuse_files(&paths, &grid, rows, &p, &crate::Silent).unwrap();
             assert_eq!(f.counts, whole.counts, "{rows} rows");
@@ -298,5 +345,40 @@ mod tests {
         let other = DsmGrid::new(1000.0, 2000.0, 0.5, 8, 9, 32617).unwrap();
         let e = fuse_files(&paths, &other, 4, &p, &crate::Silent).unwrap_err();
         assert!(format!("{e:#}").contains("p0.tif"), "{e:#}");
+    }
+
+    #[test]
+    fn shifted_blocks_are_the_benchmarks_shift() {
+        let dir = tempfile::tempdir().unwrap();
+        let grid = DsmGrid::new(1000.0, 2000.0, 0.5, 6, 5, 32617).unwrap();
+        let data: Vec<f32> = (0..30).map(|i| i as f32).collect();
+        let img = Image::new(6, 5, 1, data).unwrap();
+        let path = dir.path().join("d.tif");
+        camera::write_dsm(&path, &img, &grid).unwrap();
+        for (dx, dy) in [(0, 0), (2, -1), (-3, 2), (7, 0), (0, -6), (-1, 1)] {
+            let s = Shift {
+                dx,
+                dy,
+                offset: 0.5,
+            };
+            let expected = crate::eval::align::apply(&img, dx, dy, 0.5);
+            for rows in [1, 2, 5] {
+                let mut r = TiffReader::open(&path).unwrap();
+                let mut got = Vec::new();
+                for y0 in (0..5).step_by(rows) {
+                    let n = rows.min(5 - y0);
+                    got.extend(read_shifted(&mut r, (6, 5), y0, n, s).unwrap());
+                }
+                let same = got
+                    .iter()
+                    .zip(expected.data())
+                    .all(|(a, b)| a == b || (a.is_nan() && b.is_nan()));
+                assert!(
+                    same,
+                    "{dx},{dy} by {rows} rows: {got:?} vs {:?}",
+                    expected.data()
+                );
+            }
+        }
     }
 }
