@@ -29,7 +29,8 @@ use crate::progress::Progress;
 /// How heights of one cell become one.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct FusionParams {
-    /// Two sorted heights further apart than this, metres, belong to different clusters.
+    /// Two sorted heights further apart than this, metres, belong to different clusters (default
+    /// 0.5 m: on the dev set 0.25, 0.5, 1, 1.5 m gave 0.82, 0.85, 0.93, 0.96 m MAE).
     pub tolerance: f32,
     /// Fewest members of the kept cluster for the cell to be trusted.
     pub min_support: usize,
@@ -38,7 +39,7 @@ pub struct FusionParams {
 impl Default for FusionParams {
     fn default() -> Self {
         FusionParams {
-            tolerance: 1.0,
+            tolerance: 0.5,
             min_support: 1,
         }
     }
@@ -262,7 +263,10 @@ mod tests {
 
     #[test]
     fn a_bimodal_cell_keeps_the_stronger_mode() {
-        let p = FusionParams::default();
+        let p = FusionParams {
+            tolerance: 1.0,
+            min_support: 1,
+        };
         // Three pairs see the roof near 20 m, two the ground near 10 m.
         let c = fuse(&[10.0, 20.2, 19.9, 10.3, 20.0], &p).unwrap();
         assert_eq!((c.height, c.support), (20.0, 3));
@@ -293,7 +297,11 @@ mod tests {
             vec![1.5, NAN, 9.0, 4.0],
             vec![NAN, NAN, 3.4, NAN],
         ];
-        let f = fuse_block(&layers, 4, &FusionParams::default());
+        let p = FusionParams {
+            tolerance: 1.0,
+            min_support: 1,
+        };
+        let f = fuse_block(&layers, 4, &p);
         assert_eq!(f.counts, vec![2, 0, 3, 1]);
         assert_eq!(f.heights[0], 1.25);
         assert!(f.heights[1].is_nan() && f.spreads[1].is_nan());

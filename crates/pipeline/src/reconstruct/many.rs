@@ -91,10 +91,10 @@ pub struct ReconstructManyOptions {
 }
 
 /// Default number of pairs.
-pub const DEFAULT_PAIRS: usize = 10;
+pub const DEFAULT_PAIRS: usize = 12;
 
 impl ReconstructManyOptions {
-    /// The defaults: the best 10 pairs, 1 m clusters, agreement by [`auto_min_support`], no
+    /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_support`], no
     /// co-registration, fill 40 cells, 7×7 median.
     pub fn new(
         images: Vec<PathBuf>,
@@ -337,8 +337,8 @@ pub fn reconstruct_many(
 
 /// The default agreement of a fusion of `pairs` DSMs: at least 2 pairs (a height that only one
 /// pair measured is too often a mismatch), a quarter of them from 12 pairs on, never more than
-/// there are pairs. On the dev set (12 pairs) 1, 2, 3, 4 agreeing pairs gave 1.42, 1.05, 0.93,
-/// 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
+/// there are pairs. On the dev set (12 pairs, 1 m clusters) 1, 2, 3, 4 agreeing pairs gave 1.42,
+/// 1.05, 0.93, 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
 pub fn auto_min_support(pairs: usize) -> usize {
     (pairs.div_ceil(4)).max(2).min(pairs.max(1))
 }
@@ -820,4 +820,15 @@ fn fusion_rows(grid: &DsmGrid, pairs: usize, max_memory: u64) -> Result<usize> {
     let left = (max_memory - held - super::PROCESS_BYTES) / 8;
     let per_row = (grid.width * pairs.max(1) * 8) as u64;
     Ok(((left / per_row.max(1)) as usize).clamp(16, grid.height.max(16)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn agreement_grows_with_the_pairs_but_never_beyond_them() {
+        let m: Vec<usize> = [1, 2, 3, 8, 12, 16, 20].map(auto_min_support).to_vec();
+        assert_eq!(m, vec![1, 2, 2, 2, 3, 4, 5]);
+    }
 }
