@@ -34,7 +34,9 @@ use serde::Serialize;
 
 use super::fuse::{fuse_files, Fused, FusionParams, Shift};
 use super::raw::RawImage;
-use super::select::{choose_pairs, json_metadata, parse_day, rank_pairs, PairChoice, View};
+use super::select::{
+    choose_pairs, json_metadata, parse_day, rank_pairs, Acquisition, PairChoice, View,
+};
 use super::tile::TileStatus;
 use super::{footprint, reconstruct, score_against_truth, ReconstructOptions};
 use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
@@ -595,9 +597,9 @@ fn open_views(opts: &ReconstructManyOptions, zone: UtmZone) -> Result<Vec<View>>
         let raw = RawImage::open(image, "input")?;
         let json = rpc_json(opts, image)?;
         let rpc = camera_of(image, raw.rpc.clone(), json.as_deref(), "input")?;
-        let (date, sun) = match &json {
+        let Acquisition { date, sun } = match &json {
             Some(j) => json_metadata(j)?,
-            None => (None, None),
+            None => Acquisition::default(),
         };
         let (alt_range, _) = altitude_range(opts.alt_range, &rpc, &rpc)?;
         let (w, h) = raw.size();

@@ -161,8 +161,17 @@ fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
     era * 146097 + doe - 719468
 }
 
+/// What a SatNeRF JSON camera says of its acquisition besides the RPC.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Acquisition {
+    /// `acquisition_date` as written (`YYYYMMDDhhmmss`).
+    pub date: Option<String>,
+    /// `sun_elevation`, `sun_azimuth`, degrees.
+    pub sun: Option<(f64, f64)>,
+}
+
 /// The date and sun angles of a SatNeRF JSON camera (fields absent → `None`).
-pub fn json_metadata(path: &Path) -> Result<(Option<String>, Option<(f64, f64)>)> {
+pub fn json_metadata(path: &Path) -> Result<Acquisition> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let v: serde_json::Value =
@@ -176,7 +185,7 @@ pub fn json_metadata(path: &Path) -> Result<(Option<String>, Option<(f64, f64)>)
     };
     let date = v["acquisition_date"].as_str().map(str::to_owned);
     let sun = number("sun_elevation").zip(number("sun_azimuth"));
-    Ok((date, sun))
+    Ok(Acquisition { date, sun })
 }
 
 /// The unit line of sight from the ground point (lon, lat, alt) towards the camera, in local
