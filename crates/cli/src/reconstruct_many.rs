@@ -123,12 +123,14 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<ExitCode> 
             .clone()
             .unwrap_or_else(|| format!("tiles {} failed", p.failed_tiles.join(", ")));
         eprintln!(
-            "warning: pair {} {:?}: {why} (rerun the same command to retry it)",
-            p.stem, p.status
+            "warning: pair {} {}: {why} (rerun the same command after fixing it: finished pairs \
+             and tiles are kept)",
+            p.stem,
+            status_word(p.status)
         );
     }
     let Some(f) = &s.fused else {
-        eprintln!("error: no pair produced a DSM: nothing written");
+        eprintln!("error: no pair produced a DSM: no DSM, count, spread or report written");
         return Ok(ExitCode::from(3));
     };
     println!("{}", fused_line(&s, f));
@@ -223,17 +225,21 @@ fn pair_line(p: &seasonstereo::PairOutcome) -> String {
             within(p.within_1m)
         )
     });
-    let status = match p.status {
-        PairStatus::Done => "done",
-        PairStatus::Partial => "partial",
-        PairStatus::Failed => "FAILED",
-    };
+    let status = status_word(p.status);
     format!(
         "pair {} {status}: {:.1} % of the grid measured, {:.1} s{scores}",
         p.stem,
         100.0 * p.measured_share,
         p.seconds
     )
+}
+
+fn status_word(s: PairStatus) -> &'static str {
+    match s {
+        PairStatus::Done => "done",
+        PairStatus::Partial => "partial (tiles failed)",
+        PairStatus::Failed => "FAILED",
+    }
 }
 
 /// The fused DSM's line.

@@ -94,6 +94,56 @@ fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
     let max = count.data().iter().copied().fold(0.0f32, f32::max);
     assert_eq!(max, 3.0);
     assert!(stdout.contains("vs truth: MAE filtered"), "{stdout}");
+    // A rerun resumes: every pair's tiles are finished, none is recomputed.
+    let record = dir.path().join("fused_work/pairs").join(format!(
+        "{}_work/tiles/r000_c000.json",
+        pairs[0]["stem"].as_str().unwrap()
+    ));
+    let before = std::fs::metadata(&record).unwrap().modified().unwrap();
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::metadata(&record).unwrap().modified().unwrap(),
+        before
+    );
+}
+
+/// Pairs that fail are named: exit 2 when the others give a DSM, 3 (nothing written) when none
+/// does. A memory budget that fits one pair's tile and not the other's makes them fail.
+#[test]
+fn failed_pairs_exit_2_when_partial_and_3_when_nothing_is_produced() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let rpc_dir = d.join("rpcs/ba");
+    let images: Vec<String> = ["003", "004", "013"]
+        .iter()
+        .map(|id| image(&d, id))
+        .collect();
+    let run = |memory: &str, name: &str| {
+        let out = dir.path().join(name);
+        let mut args: Vec<&str> = vec!["reconstruct-many"];
+        args.extend(images.iter().map(String::as_str));
+        args.extend(["--rpc-dir", rpc_dir.to_str().unwrap(), "--pairs", "2"]);
+        args.extend(["--max-memory", memory, "-o", out.to_str().unwrap()]);
+        (seasonstereo(&args), out)
+    };
+    // 004–013 needs about 0.8 GiB, 004–003 about 0.95 GiB.
+    let (o, out) = run("0.85", "partial.tif");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(out.is_file() && dir.path().join("partial_count.tif").is_file());
+    assert!(
+        stderr(&o).contains("JAX_068_004_RGB-JAX_068_003_RGB FAILED"),
+        "{}",
+        stderr(&o)
+    );
+    let (o, out) = run("0.3", "none.tif");
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no pair produced a DSM"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists() && !dir.path().join("none_report.json").exists());
 }
 
 fn bytes(paths: &[PathBuf]) -> Vec<Vec<u8>> {
