@@ -241,12 +241,49 @@ impl ReconstructManySummary {
 }
 
 /// Chooses the pairs, reconstructs each, fuses them and writes the DSM, its count and spread
-/// rasters and the report. With `dry_run`, only chooses.
+/// rasters and the report. With `dry_run`, only chooses. The steps: `plan` (inputs checked,
+/// pairs chosen, grid), `run_pairs`, `fuse_pairs`, the report.
 pub fn reconstruct_many(
     opts: &ReconstructManyOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructManySummary> {
     let start = Instant::now();
+    let (mut summary, grids) = plan(opts)?;
+    if opts.dry_run {
+        return Ok(summary);
+    }
+    let rows = fusion_rows(&grids.fused, summary.chosen.len(), opts.max_memory)?;
+    let truth = match &opts.truth {
+        Some(t) => Some(crate::score::read_truth(t, grids.fused.zone())?),
+        None => None,
+    };
+    run_pairs(opts, &mut summary, &grids, truth.as_ref(), progress);
+    fuse_pairs(
+        opts,
+        &mut summary,
+        &grids.fused,
+        rows,
+        truth.as_ref(),
+        progress,
+    )?;
+    summary.seconds = start.elapsed().as_secs_f64();
+    if summary.fused.is_some() {
+        let report = opts.sibling("_report.json");
+        write_json(&report, &summary)?;
+        summary.report = Some(report);
+    }
+    Ok(summary)
+}
+
+/// The fused grid, and the choice that gives every pair exactly that grid.
+struct Grids {
+    fused: DsmGrid,
+    pairs: GridChoice,
+}
+
+/// Everything decided before any work: the inputs checked, the views, the chosen pairs and the
+/// grid.
+fn plan(opts: &ReconstructManyOptions) -> Result<(ReconstructManySummary, Grids)> {
     check_outputs(opts)?;
     let zone = scene_zone(opts)?;
     let views = open_views(opts, zone)?;
@@ -255,12 +292,12 @@ pub fn reconstruct_many(
     let alt = middle_altitude(opts, &views)?;
     let ranked = rank_pairs(&views, zone, alt)?;
     let chosen = choose_pairs(&ranked, opts.pairs)?;
-    let (grid, pair_grid) = common_grid(opts, &chosen, zone)?;
+    let (fused, pairs) = common_grid(opts, &chosen, zone)?;
     let work = opts
         .work_dir
         .clone()
         .unwrap_or_else(|| super::default_work_dir(&opts.output));
-    let mut summary = ReconstructManySummary {
+    let summary = ReconstructManySummary {
         views,
         candidates: ranked.len(),
         chosen,
@@ -269,18 +306,22 @@ pub fn reconstruct_many(
         fused: None,
         scores: None,
         within_1m: None,
-        work: work.clone(),
+        work,
         report: None,
         seconds: 0.0,
     };
-    if opts.dry_run {
-        return Ok(summary);
-    }
-    let rows = fusion_rows(&grid, summary.chosen.len(), opts.max_memory)?;
-    let truth = match &opts.truth {
-        Some(t) => Some(crate::score::read_truth(t, grid.zone())?),
-        None => None,
-    };
+    Ok((summary, Grids { fused, pairs }))
+}
+
+/// Runs every chosen pair through the tiled reconstruction, one after the other; a failing pair
+/// is recorded and the others go on.
+fn run_pairs(
+    opts: &ReconstructManyOptions,
+    summary: &mut ReconstructManySummary,
+    grids: &Grids,
+    truth: Option<&crate::eval::Truth>,
+    progress: &dyn Progress,
+) {
     for (k, pair) in summary.chosen.iter().enumerate() {
         let shown = PairProgress {
             inner: progress,
@@ -288,53 +329,59 @@ pub fn reconstruct_many(
             total: summary.chosen.len(),
             steps: std::sync::atomic::AtomicUsize::new(1),
         };
-        let pair_opts = pair_options(opts, &summary.views, pair, &pair_grid, &work);
-        let mut outcome = run_pair(&pair_opts, &grid, &pair.stem, &shown);
-        if let (Some(t), Some(s)) = (&truth, &outcome.scores) {
+        let pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
+        let mut outcome = run_pair(&pair_opts, &grids.fused, &pair.stem, &shown);
+        if let (Some(t), Some(s)) = (truth, &outcome.scores) {
             outcome.within_1m = within_1m(&outcome.dsm, t, s).ok().flatten();
         }
         summary.pairs.push(outcome);
     }
+}
+
+/// Fuses the DSMs of the pairs that produced one (registered on the first when asked), writes
+/// the fused files and scores them; nothing when no pair produced a DSM.
+fn fuse_pairs(
+    opts: &ReconstructManyOptions,
+    summary: &mut ReconstructManySummary,
+    grid: &DsmGrid,
+    rows: usize,
+    truth: Option<&crate::eval::Truth>,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let t = Instant::now();
     let fusable: Vec<usize> = (0..summary.pairs.len())
         .filter(|&i| summary.pairs[i].status != PairStatus::Failed)
         .collect();
-    if !fusable.is_empty() {
-        let t = Instant::now();
-        let reference = summary.pairs[fusable[0]].dsm.clone();
-        let mut layers = Vec::with_capacity(fusable.len());
-        for &i in &fusable {
-            let p = &mut summary.pairs[i];
-            let shift = if opts.co_register {
-                co_register(&reference, &p.dsm, &grid)?
-            } else {
-                Shift::default()
-            };
-            p.registration = Some(shift);
-            layers.push((p.dsm.clone(), shift));
-        }
-        let params = FusionParams {
-            tolerance: opts.cluster_tolerance,
-            min_support: opts
-                .min_support
-                .unwrap_or_else(|| auto_min_support(layers.len())),
+    let Some(&first) = fusable.first() else {
+        return Ok(());
+    };
+    let reference = summary.pairs[first].dsm.clone();
+    let mut layers = Vec::with_capacity(fusable.len());
+    for &i in &fusable {
+        let p = &mut summary.pairs[i];
+        let shift = if opts.co_register {
+            co_register(&reference, &p.dsm, grid)?
+        } else {
+            Shift::default()
         };
-        summary.fusion = Some(params);
-        let fused = fuse_files(&layers, &grid, rows, &params, progress)?;
-        summary.fused = Some(write_fused(opts, fused, &grid, fusable.len(), t)?);
-        if let Some(t) = &opts.truth {
-            let scores = score_against_truth(&opts.output, t, &grid)?;
-            let truth = truth.as_ref().expect("read with the option");
-            summary.within_1m = within_1m(&opts.output, truth, &scores)?;
-            summary.scores = Some(scores);
-        }
+        p.registration = Some(shift);
+        layers.push((p.dsm.clone(), shift));
     }
-    summary.seconds = start.elapsed().as_secs_f64();
-    if summary.fused.is_some() {
-        let report = opts.sibling("_report.json");
-        write_json(&report, &summary)?;
-        summary.report = Some(report);
+    let params = FusionParams {
+        tolerance: opts.cluster_tolerance,
+        min_support: opts
+            .min_support
+            .unwrap_or_else(|| auto_min_support(layers.len())),
+    };
+    summary.fusion = Some(params);
+    let fused = fuse_files(&layers, grid, rows, &params, progress)?;
+    summary.fused = Some(write_fused(opts, fused, grid, layers.len(), t)?);
+    if let (Some(path), Some(truth)) = (&opts.truth, truth) {
+        let scores = score_against_truth(&opts.output, path, grid)?;
+        summary.within_1m = within_1m(&opts.output, truth, &scores)?;
+        summary.scores = Some(scores);
     }
-    Ok(summary)
+    Ok(())
 }
 
 /// The default agreement of a fusion of `pairs` DSMs: at least 2 pairs (a height that only one
