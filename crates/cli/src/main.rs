@@ -106,7 +106,7 @@ enum Command {
 }
 
 /// `mi_option_purge_delay` of mimalloc's `mi_option_e` (`mimalloc.h`).
-const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
+pub(crate) const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 
 /// Freed pages are never handed back to the kernel (`-1`). mimalloc's default returns the pages
 /// of a network's tensors between two layers and faults them in again, zeroed, for the next

@@ -108,6 +108,11 @@ pub struct ReconstructManyArgs {
 
 /// Runs the command; the exit code says whether every pair was fused (0), some (2) or none (3).
 pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<ExitCode> {
+    // Pairs of different sizes run one after the other: freed pages go back to the kernel after
+    // 10 ms (mimalloc's default) instead of never (main.rs), or the process would hold every
+    // pair's peak at once and overshoot --max-memory (2.25 GB for 12 dev pairs at 2 GiB).
+    // SAFETY: sets a plain integer option of the allocator.
+    unsafe { libmimalloc_sys::mi_option_set(crate::MI_OPTION_PURGE_DELAY, 10) };
     let s = reconstruct_many(&a.options()?, progress)?;
     print_pairs(&s.chosen, &s.views, s.candidates);
     if s.pairs.is_empty() {
