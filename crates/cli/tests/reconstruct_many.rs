@@ -211,6 +211,34 @@ fn bad_input_is_refused_before_any_work() {
     );
     // A malformed command line is an error before work too (1, not clap's 2 = partial).
     refused(&[m, &a, &b, "--no-such-flag"], "--no-such-flag");
+    // An image whose camera puts it 0.05° (5 km) north of the others overlaps none of them.
+    let far = dir.path().join("far");
+    std::fs::create_dir(&far).unwrap();
+    let mut cam: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(rpc_dir.join("JAX_068_005_RGB.json")).unwrap(),
+    )
+    .unwrap();
+    let lat = cam["rpc"]["lat_offset"].as_f64().unwrap();
+    cam["rpc"]["lat_offset"] = serde_json::json!(lat + 0.05);
+    std::fs::write(far.join("JAX_068_005_RGB.json"), cam.to_string()).unwrap();
+    for id in ["003", "004"] {
+        let name = format!("JAX_068_{id}_RGB.json");
+        std::fs::copy(rpc_dir.join(&name), far.join(&name)).unwrap();
+    }
+    let e = image(&d, "005");
+    refused(
+        &[
+            m,
+            &a,
+            &b,
+            &e,
+            "--rpc-dir",
+            far.to_str().unwrap(),
+            "-o",
+            o_path,
+        ],
+        "JAX_068_005_RGB.tif overlaps none of the other images",
+    );
     assert_eq!(bytes(&inputs), before, "an input changed");
     assert!(!out.exists() && !dir.path().join("dsm_work").exists());
 }
