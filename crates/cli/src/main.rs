@@ -62,7 +62,7 @@ enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     /// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence,
     /// incidence and sun angles, each reconstructed on one grid, fused per cell (strongest height
-    /// cluster), holes filled only where no pair measured; count and spread rasters, a report.
+    /// cluster), holes filled where no pair measured or too few agreed; count and spread rasters, a report.
     /// Exit 2 when some pairs failed, 3 when none produced a DSM.
     ReconstructMany(reconstruct_many::ReconstructManyArgs),
     /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).

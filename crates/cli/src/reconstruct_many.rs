@@ -21,9 +21,10 @@ use crate::args::{parse_alt_range, GriddingArg, MatcherArgs};
     (--dry-run prints them with these terms). Each pair runs through `reconstruct` without hole \
     filling on one grid (--like, else the union of the pairs' overlaps); per cell the pairs' \
     heights are cut into clusters at gaps over --cluster-tolerance, the largest cluster (ties: \
-    the higher) gives the median; holes are filled only where no pair measured.\n\n\
-    Files: OUTPUT, OUTPUT_count.tif (pairs that measured each cell; 0 = filled or empty), \
-    OUTPUT_spread.tif (median absolute deviation of the kept heights, m), OUTPUT_report.json, \
+    the higher) gives the median when --min-support pairs agree; the other cells (no pair measured, or too few agreed) are filled as holes.\n\n\
+    Files: OUTPUT, OUTPUT_count.tif (pairs that measured each cell), \
+    OUTPUT_spread.tif (median absolute deviation of the kept heights, m; NaN where no height was \
+    kept: those cells are filled or empty), OUTPUT_report.json, \
     and --work (default OUTPUT_work/: pairs/<pair>.tif and their tiles; a rerun resumes).\n\n\
     Exit codes: 0 all pairs done; 1 error before any work; 2 partial (some pairs failed, named; \
     the DSM fuses the others); 3 nothing produced.\n\n\

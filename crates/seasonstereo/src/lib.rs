@@ -119,7 +119,7 @@ pub fn reconstruct(
 /// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence, incidence
 /// and sun angles (`options.pairs` of them), each through [`reconstruct`] without hole filling on
 /// one common grid, fused cell by cell (strongest height cluster, its median), holes filled only
-/// where no pair measured; writes the DSM, `<stem>_count.tif`, `<stem>_spread.tif` and
+/// where no pair measured or too few agreed; writes the DSM, `<stem>_count.tif`, `<stem>_spread.tif` and
 /// `<stem>_report.json`. With `options.dry_run` it only chooses the pairs. A pair that fails is
 /// recorded in the summary ([`PairStatus`]), not returned as an error; bad input is refused
 /// before any work.

@@ -1,14 +1,15 @@
 //! Many dates, one DSM: every acquisition of an area → the best pairs by metadata and geometry
 //! ([`super::select`]) → each pair through the tiled [`super::reconstruct`] on one common grid,
 //! without hole filling (the fusion uses measured cells only) → the pairs' DSMs fused cell by
-//! cell ([`super::fuse`]) → holes filled where no pair measured, median filter, the COG.
+//! cell ([`super::fuse`]) → holes filled where no cluster had enough agreeing pairs, median filter, the COG.
 //!
 //! Files, for `-o OUT/dsm.tif` (work folder `OUT/dsm_work` unless `work_dir` is given):
 //!
 //! ```text
 //! OUT/dsm.tif                 fused DSM (float32 COG, NaN where nothing measured nor filled)
-//! OUT/dsm_count.tif           pairs that measured each cell (0: the height, if any, is filled)
-//! OUT/dsm_spread.tif          median absolute deviation of the kept cluster, metres (NaN: none)
+//! OUT/dsm_count.tif           pairs that measured each cell
+//! OUT/dsm_spread.tif          median absolute deviation of the kept cluster, metres; NaN where
+//!                             no cluster was kept (the height there, if any, is filled)
 //! OUT/dsm_report.json         chosen pairs and their score terms, per-pair coverage (and scores),
 //!                             fused coverage (and scores), times
 //! OUT/dsm_work/pairs/<pair>.tif       the pair's DSM, measured cells only
@@ -507,7 +508,7 @@ fn run_pair(
     out
 }
 
-/// Fills (where no pair measured), filters and writes the fused DSM, its count and spread.
+/// Fills (where no cluster was kept), filters and writes the fused DSM, its count and spread.
 fn write_fused(
     opts: &ReconstructManyOptions,
     fused: Fused,
