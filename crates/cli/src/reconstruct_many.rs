@@ -196,6 +196,14 @@ impl ReconstructManyArgs {
 
 /// The chosen pairs with the terms of their scores.
 fn print_pairs(chosen: &[PairChoice], views: &[View], candidates: usize) {
+    let undated = views.iter().filter(|v| v.day.is_none()).count();
+    if undated > 0 {
+        eprintln!(
+            "warning: {undated} of {} images have no acquisition date (it comes from the JSON \
+             cameras of --rpc-dir): their pairs get the date term 0.5",
+            views.len()
+        );
+    }
     println!(
         "{} images, {candidates} overlapping pairs; chosen {}:",
         views.len(),
