@@ -122,19 +122,7 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<ExitCode> 
     for p in &s.pairs {
         println!("{}", pair_line(p));
     }
-    let incomplete = s.incomplete_pairs();
-    for p in &incomplete {
-        let why = p
-            .error
-            .clone()
-            .unwrap_or_else(|| format!("tiles {} failed", p.failed_tiles.join(", ")));
-        eprintln!(
-            "warning: pair {} {}: {why} (rerun the same command after fixing it: finished pairs \
-             and tiles are kept)",
-            p.stem,
-            status_word(p.status)
-        );
-    }
+    let complete = warn_incomplete(&s);
     let Some(f) = &s.fused else {
         eprintln!("error: no pair produced a DSM: no DSM, count, spread or report written");
         return Ok(ExitCode::from(3));
@@ -150,11 +138,29 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<ExitCode> 
     if let Some(r) = &s.report {
         println!("report: {}", r.display());
     }
-    Ok(if incomplete.is_empty() {
+    Ok(if complete {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(2)
     })
+}
+
+/// A warning per pair that failed or lost tiles; true when there is none.
+fn warn_incomplete(s: &ReconstructManySummary) -> bool {
+    let incomplete = s.incomplete_pairs();
+    for p in &incomplete {
+        let why = p
+            .error
+            .clone()
+            .unwrap_or_else(|| format!("tiles {} failed", p.failed_tiles.join(", ")));
+        eprintln!(
+            "warning: pair {} {}: {why} (rerun the same command after fixing it: finished pairs \
+             and tiles are kept)",
+            p.stem,
+            status_word(p.status)
+        );
+    }
+    incomplete.is_empty()
 }
 
 impl ReconstructManyArgs {

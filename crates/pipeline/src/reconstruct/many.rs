@@ -805,38 +805,7 @@ fn common_grid(
         GridChoice::Resolution {
             resolution, bounds, ..
         } => {
-            let b = match bounds {
-                Some(b) => *b,
-                None => {
-                    let u = chosen.iter().fold(
-                        [
-                            f64::INFINITY,
-                            f64::INFINITY,
-                            f64::NEG_INFINITY,
-                            f64::NEG_INFINITY,
-                        ],
-                        |u, p| {
-                            let o = p.overlap;
-                            [
-                                u[0].min(o[0]),
-                                u[1].min(o[1]),
-                                u[2].max(o[2]),
-                                u[3].max(o[3]),
-                            ]
-                        },
-                    );
-                    let snap = |v: f64, up: bool| {
-                        let k = v / resolution;
-                        resolution * if up { k.ceil() } else { k.floor() }
-                    };
-                    [
-                        snap(u[0], false),
-                        snap(u[1], false),
-                        snap(u[2], true),
-                        snap(u[3], true),
-                    ]
-                }
-            };
+            let b = bounds.unwrap_or_else(|| union_bounds(chosen, *resolution));
             let grid = DsmGrid::from_bounds(b[0], b[1], b[2], b[3], *resolution, zone.epsg())?;
             let choice = GridChoice::Resolution {
                 resolution: *resolution,
@@ -846,6 +815,38 @@ fn common_grid(
             Ok((grid, choice))
         }
     }
+}
+
+/// The union of the pairs' overlaps, snapped outwards to multiples of `resolution` (as GDAL's
+/// `-tap`).
+fn union_bounds(chosen: &[PairChoice], resolution: f64) -> [f64; 4] {
+    let u = chosen.iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |u, p| {
+            let o = p.overlap;
+            [
+                u[0].min(o[0]),
+                u[1].min(o[1]),
+                u[2].max(o[2]),
+                u[3].max(o[3]),
+            ]
+        },
+    );
+    let snap = |v: f64, up: bool| {
+        let k = v / resolution;
+        resolution * if up { k.ceil() } else { k.floor() }
+    };
+    [
+        snap(u[0], false),
+        snap(u[1], false),
+        snap(u[2], true),
+        snap(u[3], true),
+    ]
 }
 
 /// Bytes per fused cell held at once: heights, counts, spreads, and the filled and filtered
