@@ -37,6 +37,11 @@ fn safety() -> Safety {
     SAFETY.get().copied().unwrap_or_default()
 }
 
+/// Whether `--overwrite` was given.
+pub fn overwrite() -> bool {
+    safety().overwrite
+}
+
 /// Refuses `output` (of option `flag`) when it is one of `inputs`, a folder, or an existing file
 /// without `--overwrite`.
 pub fn guard_output(flag: &str, output: &Path, inputs: &[&Path]) -> anyhow::Result<()> {

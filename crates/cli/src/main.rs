@@ -19,6 +19,7 @@ mod exit;
 mod masks;
 mod predict;
 mod reconstruct;
+mod reconstruct_many;
 mod rectify;
 mod score;
 mod synthesize;
@@ -68,6 +69,11 @@ enum Command {
     /// From a raw pair to a DSM in one command: rectify from the RPCs, match over the range the
     /// cameras imply, triangulate and grid (optionally scored against a ground truth).
     Reconstruct(reconstruct::ReconstructArgs),
+    /// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence,
+    /// incidence and sun angles, each reconstructed on one grid, fused per cell (strongest
+    /// height cluster), holes filled where no pair measured or too few agreed; count and spread
+    /// rasters, a report. Exit 2 when some pairs failed, 3 when none produced a DSM.
+    ReconstructMany(reconstruct_many::ReconstructManyArgs),
     /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).
     Score(score::ScoreArgs),
     /// Time the networks (MonSter++, SegFormer, DINOv3, a training step) with random weights:
@@ -109,7 +115,7 @@ enum Command {
 }
 
 /// `mi_option_purge_delay` of mimalloc's `mi_option_e` (`mimalloc.h`).
-const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
+pub(crate) const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 
 /// Freed pages are never handed back to the kernel (`-1`). mimalloc's default returns the pages
 /// of a network's tensors between two layers and faults them in again, zeroed, for the next
@@ -139,6 +145,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Predict(a) => predict::run(a, &progress),
         Command::Dsm(a) => dsm::run(a),
         Command::Reconstruct(a) => reconstruct::run(a, &progress),
+        Command::ReconstructMany(a) => reconstruct_many::run(a, &progress),
         Command::Score(a) => score::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Teacher(a) => teacher::run(a, &progress),

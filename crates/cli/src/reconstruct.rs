@@ -291,7 +291,7 @@ fn dsm_line(s: &ReconstructSummary, dsm: &DsmSummary, output: &std::path::Path) 
 }
 
 /// A positive number of GiB in bytes.
-fn gib_to_bytes(gib: f64) -> Result<u64> {
+pub(crate) fn gib_to_bytes(gib: f64) -> Result<u64> {
     if !(gib.is_finite() && gib > 0.0) {
         bail!("--max-memory must be a positive number of GiB, got {gib}");
     }

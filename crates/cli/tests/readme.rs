@@ -33,6 +33,10 @@ const PLANS: &[(&str, Plan)] = &[
         Run,
     ),
     ("seasonstereo score out/jax/006-020.tif", Run),
+    (
+        "seasonstereo reconstruct-many $D/images/*.tif",
+        Skip("12 pairs, about a minute; tests/reconstruct_many.rs runs 4 images, 3 pairs"),
+    ),
     ("seasonstereo world --size 512 --seed 1 -o out/world", Run),
     (
         "seasonstereo world --size 4096",

@@ -10,13 +10,19 @@
 //! disparity range, coverage) and `tiles/<id>.tif` (its cells) in the work folder; a rerun skips
 //! finished tiles, retries failed ones, and `--shard I/N` runs the tiles ≡ I mod N, the DSM being
 //! assembled once every tile has a record (by the last shard, or a final merge-only run).
+//!
+//! Many acquisitions of one area become one DSM in [`many`]: the pairs chosen by [`select`] run
+//! through [`reconstruct`] on one grid and [`fuse`] merges their measured cells.
 
 pub mod folder;
+pub mod fuse;
+pub mod many;
 pub mod mosaic;
 pub mod options;
 pub mod plan;
 pub mod raw;
 pub mod sanity;
+pub mod select;
 pub mod tile;
 pub mod workers;
 
@@ -367,7 +373,7 @@ fn merge_memory(grid: &DsmGrid, max_memory: u64) -> Result<u64> {
 }
 
 /// Held by the process besides the tiles (images' headers, records, thread stacks), bytes.
-const PROCESS_BYTES: u64 = 256 << 20;
+pub(crate) const PROCESS_BYTES: u64 = 256 << 20;
 
 /// What running the tiles did.
 #[derive(Default)]
@@ -523,7 +529,7 @@ fn merge_tiles(
 }
 
 /// The benchmark's scores of the written DSM against a ground-truth DSM on its grid.
-fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmScores> {
+pub(crate) fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmScores> {
     let zone = UtmZone::from_epsg(grid.epsg)?;
     let truth = crate::score::read_truth(truth, zone)?;
     crate::score::score_dsm_file(dsm, &truth)
@@ -533,7 +539,7 @@ fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmSc
 /// filtered copies.
 const MERGE_BYTES_PER_CELL: u64 = 18;
 
-fn gib(bytes: u64) -> f64 {
+pub(crate) fn gib(bytes: u64) -> f64 {
     bytes as f64 / (1u64 << 30) as f64
 }
 
@@ -606,7 +612,12 @@ fn scene_grid(
 }
 
 /// UTM bounds of the region's outline localized at both ends of the altitude range.
-fn footprint(rpc: &RpcModel, roi: Roi, alt_range: (f64, f64), zone: UtmZone) -> Result<[f64; 4]> {
+pub(crate) fn footprint(
+    rpc: &RpcModel,
+    roi: Roi,
+    alt_range: (f64, f64),
+    zone: UtmZone,
+) -> Result<[f64; 4]> {
     let (x0, y0) = (roi.x as f64, roi.y as f64);
     let (x1, y1) = (x0 + roi.width as f64, y0 + roi.height as f64);
     let mut b = [

@@ -12,6 +12,7 @@
 //! | rectified pair → disparity | [`predict`] | [`Matcher`], [`RangeSource`] → [`Matched`] |
 //! | disparity → DSM | [`dsm`] | [`DsmOptions`] → [`DsmSummary`] |
 //! | raw pair → DSM, tiled, resumable | [`reconstruct`] | [`ReconstructOptions`] → [`ReconstructSummary`] |
+//! | many dates → best pairs → one fused DSM | [`reconstruct_many`] | [`ReconstructManyOptions`] → [`ReconstructManySummary`] |
 //! | DSM → benchmark scores | [`score`] | [`Truth`] → [`DsmScores`] |
 //! | disparities of a split → Table 1 | [`eval`] | [`EvalOptions`] → [`EvalReport`] |
 //! | the training set | [`stages`] | teacher → curate → synthesize → masks → dataset build |
@@ -54,6 +55,12 @@ pub use pipeline::eval::{EvalOptions, EvalReport, Truth};
 #[cfg(feature = "network")]
 pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
+pub use pipeline::reconstruct::fuse::FusionParams;
+pub use pipeline::reconstruct::many::{
+    auto_min_support, FusedOutcome, PairOutcome, PairStatus, ReconstructManyOptions,
+    ReconstructManySummary, DEFAULT_PAIRS,
+};
+pub use pipeline::reconstruct::select::{PairChoice, PairTerms, View};
 pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};
 pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary};
 pub use pipeline::rectify::{RectifyOptions, RectifySummary};
@@ -107,6 +114,20 @@ pub fn reconstruct(
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
     pipeline::reconstruct::reconstruct(options, progress)
+}
+
+/// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence, incidence
+/// and sun angles (`options.pairs` of them), each through [`reconstruct`] without hole filling on
+/// one common grid, fused cell by cell (strongest height cluster, its median), holes filled only
+/// where no pair measured or too few agreed; writes the DSM, `<stem>_count.tif`, `<stem>_spread.tif` and
+/// `<stem>_report.json`. With `options.dry_run` it only chooses the pairs. A pair that fails is
+/// recorded in the summary ([`PairStatus`]), not returned as an error; bad input is refused
+/// before any work.
+pub fn reconstruct_many(
+    options: &ReconstructManyOptions,
+    progress: &dyn Progress,
+) -> Result<ReconstructManySummary> {
+    pipeline::reconstruct::many::reconstruct_many(options, progress)
 }
 
 /// Reads a ground truth `<AOI>_DSM.tif` (GeoTIFF, or DFC2019 plain TIFF + `<AOI>_DSM.txt` in

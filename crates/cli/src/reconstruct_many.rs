@@ -1,0 +1,303 @@
+//! `seasonstereo reconstruct-many`: every acquisition of an area → the best pairs → one fused
+//! DSM.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use clap::Args;
+use pipeline::outputs::Incomplete;
+use seasonstereo::{
+    reconstruct_many, FusionParams, GridChoice, PairChoice, PairStatus, Progress,
+    ReconstructManyOptions, ReconstructManySummary, View,
+};
+
+use crate::args::{parse_alt_range, GriddingArg, MatcherArgs};
+
+#[derive(Args)]
+#[command(
+    after_help = "Pairs: every overlapping pair is scored from metadata and geometry \
+    alone: date 1/(1 + days/45) × convergence (0 below 1°, 1 from 5° to 45°, 0 from 60°) × \
+    cos(largest incidence) × sun (1 − 0.5·min(Δsun/60°, 1)); the best --pairs run \
+    (--dry-run prints them with these terms). Each pair runs through `reconstruct` without hole \
+    filling on one grid (--like, else the union of the pairs' overlaps); per cell the pairs' \
+    heights are cut into clusters at gaps over --cluster-tolerance, the largest cluster (ties: \
+    the higher) gives the median when --min-support pairs agree; the other cells (no pair measured, or too few agreed) are filled as holes.\n\n\
+    Files: OUTPUT, OUTPUT_count.tif (pairs that measured each cell), \
+    OUTPUT_spread.tif (median absolute deviation of the kept heights, m; NaN where no height was \
+    kept: those cells are filled or empty), OUTPUT_report.json, \
+    and --work (default OUTPUT_work/: pairs/<pair>.tif and their tiles; a rerun resumes).\n\n\
+    Exit codes: 0 all pairs done; 1 error before any work; 2 partial (some pairs failed, named; \
+    the DSM fuses the others); 3 nothing produced.\n\n\
+    Example (DFC2019 Jacksonville, ten acquisitions):\n  D=../shared/data/dfc2019-jax068-dev\n  \
+    seasonstereo reconstruct-many $D/images/*.tif --rpc-dir $D/rpcs/ba --like \
+    $D/truth/JAX_068_DSM.tif --truth $D/truth/JAX_068_DSM.tif -o out/jax-many/dsm.tif"
+)]
+pub struct ReconstructManyArgs {
+    /// The raw images of the area (two or more; GeoTIFFs with RPC tags, or cameras in --rpc-dir).
+    #[arg(required = true, value_name = "IMAGE")]
+    images: Vec<PathBuf>,
+    /// Output fused DSM (float32 COG).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Folder of the cameras as SatNeRF/rpcm JSON, one `<image stem>.json` per image (dates and
+    /// sun angles are read from them too). Default: the images' RPC tags.
+    #[arg(long, value_name = "DIR")]
+    rpc_dir: Option<PathBuf>,
+    /// How many pairs to reconstruct and fuse: the best by score.
+    #[arg(long, value_name = "K", default_value_t = seasonstereo::DEFAULT_PAIRS)]
+    pairs: usize,
+    /// Print the chosen pairs and their score terms; reconstruct nothing.
+    #[arg(long)]
+    dry_run: bool,
+    /// Heights of one cell further apart than this, metres, are different surfaces.
+    #[arg(long, value_name = "M", default_value_t = FusionParams::default().tolerance)]
+    cluster_tolerance: f32,
+    /// Fewest pairs that must agree (within the tolerance) for a cell to keep a measured height;
+    /// other cells are filled like unmeasured ones. Default: 2, a quarter of the pairs from 12
+    /// pairs on, at most the number of pairs.
+    #[arg(long, value_name = "N")]
+    min_support: Option<usize>,
+    /// Register each pair's DSM on the first pair's (integer NCC shift and vertical offset)
+    /// before fusing; off by default (it did not help on the dev set, BENCHMARKS.md).
+    #[arg(long)]
+    register: bool,
+    /// Fill the fused DSM's holes (cells no pair measured) enclosed by data within this many
+    /// cells; 0 leaves them empty.
+    #[arg(long, value_name = "CELLS", default_value_t = 40)]
+    fill_holes: usize,
+    /// Median filter of the fused DSM over this odd window of cells; 0 or 1 disables it.
+    #[arg(long, value_name = "CELLS", default_value_t = 7)]
+    median_filter: usize,
+    /// Median filter of each pair's DSM before fusion (never fills a cell); 0 or 1 disables it.
+    #[arg(long, value_name = "CELLS", default_value_t = 0)]
+    pair_median_filter: usize,
+    /// Folder of the pairs' DSMs and tiles (default: OUTPUT without extension + "_work").
+    #[arg(long, value_name = "DIR")]
+    work: Option<PathBuf>,
+    /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
+    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
+    like: Option<PathBuf>,
+    /// Cell size in metres (without --like).
+    #[arg(long, default_value_t = 0.5)]
+    resolution: f64,
+    /// EPSG code of the UTM zone (without --like; default: the first camera's zone).
+    #[arg(long)]
+    epsg: Option<u32>,
+    /// Score the fused DSM and every pair's against this truth <AOI>_DSM.tif; needs --like on
+    /// the same file.
+    #[arg(long, value_name = "DSM", requires = "like")]
+    truth: Option<PathBuf>,
+    /// Altitudes of the scene MIN:MAX, metres (default: the JSONs' min_alt/max_alt, else the
+    /// RPCs').
+    #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
+    alt_range: Option<(f64, f64)>,
+    /// Height of a cell of a pair's DSM from its points.
+    #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
+    gridding: GriddingArg,
+    /// Tile side of each pair, left raw pixels.
+    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    tile: usize,
+    /// Overlap collar around each tile, pixels.
+    #[arg(long, value_name = "PX", default_value_t = 64)]
+    collar: usize,
+    /// Memory budget of the process, GiB (each pair's tiles, then the fusion by row blocks).
+    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
+    max_memory: f64,
+    #[command(flatten)]
+    matcher: MatcherArgs,
+}
+
+/// Runs the command: an error of [`Incomplete`] when some pairs failed (exit 2) or none produced
+/// a DSM (exit 3).
+pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
+    // Pairs of different sizes run one after the other: freed pages go back to the kernel after
+    // 10 ms (mimalloc's default) instead of never (main.rs), or the process would hold every
+    // pair's peak at once and overshoot --max-memory (2.25 GB for 12 dev pairs at 2 GiB).
+    // SAFETY: sets a plain integer option of the allocator.
+    unsafe { libmimalloc_sys::mi_option_set(crate::MI_OPTION_PURGE_DELAY, 10) };
+    let s = reconstruct_many(&a.options()?, progress)?;
+    print_pairs(&s.chosen, &s.views, s.candidates);
+    if s.pairs.is_empty() {
+        return Ok(());
+    }
+    for p in &s.pairs {
+        println!("{}", pair_line(p));
+    }
+    let incomplete = warn_incomplete(&s);
+    let Some(f) = &s.fused else {
+        return Err(Incomplete::Nothing {
+            message: "no pair produced a DSM: no DSM, count, spread or report written".into(),
+        }
+        .into());
+    };
+    println!("{}", fused_line(&s, f));
+    if let Some(sc) = &s.scores {
+        println!(
+            "vs truth: {}{}",
+            crate::score::format_scores(sc),
+            within(s.within_1m)
+        );
+    }
+    if let Some(r) = &s.report {
+        println!("report: {}", r.display());
+    }
+    if incomplete.is_empty() {
+        return Ok(());
+    }
+    Err(crate::exit::partial(
+        "pairs",
+        s.pairs.len(),
+        incomplete,
+        "rerun the same command after fixing them (finished pairs and tiles are kept)",
+    ))
+}
+
+/// A warning per pair that failed or lost tiles; their names.
+fn warn_incomplete(s: &ReconstructManySummary) -> Vec<String> {
+    let incomplete = s.incomplete_pairs();
+    for p in &incomplete {
+        let why = p
+            .error
+            .clone()
+            .unwrap_or_else(|| format!("tiles {} failed", p.failed_tiles.join(", ")));
+        eprintln!(
+            "warning: pair {} {}: {why} (rerun the same command after fixing it: finished pairs \
+             and tiles are kept)",
+            p.stem,
+            status_word(p.status)
+        );
+    }
+    incomplete.iter().map(|p| p.stem.clone()).collect()
+}
+
+impl ReconstructManyArgs {
+    /// The library's options for these flags.
+    fn options(self) -> Result<ReconstructManyOptions> {
+        let grid = match &self.like {
+            Some(p) => GridChoice::Like(p.clone()),
+            None => GridChoice::Resolution {
+                resolution: self.resolution,
+                bounds: None,
+                epsg: self.epsg,
+            },
+        };
+        let mut o = ReconstructManyOptions::new(
+            self.images,
+            self.rpc_dir,
+            self.matcher.matcher()?,
+            grid,
+            self.output,
+        );
+        let on = |cells: usize| (cells > 1).then_some(cells);
+        o.work_dir = self.work;
+        o.pairs = self.pairs;
+        o.dry_run = self.dry_run;
+        o.cluster_tolerance = self.cluster_tolerance;
+        o.min_support = self.min_support;
+        o.co_register = self.register;
+        o.fill_holes = (self.fill_holes > 0).then_some(self.fill_holes);
+        o.median_filter = on(self.median_filter);
+        o.pair_median_filter = on(self.pair_median_filter);
+        o.truth = self.truth;
+        o.alt_range = self.alt_range;
+        o.gridding = self.gridding.into();
+        (o.tile, o.collar) = (self.tile, self.collar);
+        o.max_memory = crate::reconstruct::gib_to_bytes(self.max_memory)?;
+        o.overwrite = crate::exit::overwrite();
+        Ok(o)
+    }
+}
+
+/// The chosen pairs with the terms of their scores.
+fn print_pairs(chosen: &[PairChoice], views: &[View], candidates: usize) {
+    let undated = views.iter().filter(|v| v.day.is_none()).count();
+    if undated > 0 {
+        eprintln!(
+            "warning: {undated} of {} images have no acquisition date (it comes from the JSON \
+             cameras of --rpc-dir): their pairs get the date term 0.5",
+            views.len()
+        );
+    }
+    println!(
+        "{} images, {candidates} overlapping pairs; chosen {}:",
+        views.len(),
+        chosen.len()
+    );
+    for p in chosen {
+        let t = &p.terms;
+        let opt = |v: Option<f64>, unit: &str| v.map_or("?".into(), |v| format!("{v:.1}{unit}"));
+        println!(
+            "  {:<36} score {:.3} = date {:.2} ({} apart) × convergence {:.2} ({:.1}°) × \
+             incidence {:.2} ({:.1}°, {:.1}°) × sun {:.2} ({} apart)",
+            p.stem,
+            t.score,
+            t.date_term,
+            opt(t.days, " d"),
+            t.convergence_term,
+            t.convergence_deg,
+            t.incidence_term,
+            t.incidence_deg.0,
+            t.incidence_deg.1,
+            t.sun_term,
+            opt(t.sun_deg, "°")
+        );
+    }
+}
+
+/// One pair's line: status, measured share, scores.
+fn pair_line(p: &seasonstereo::PairOutcome) -> String {
+    let scores = p.scores.as_ref().map_or(String::new(), |s| {
+        format!(
+            ", vs truth: {}{}",
+            crate::score::format_scores(s),
+            within(p.within_1m)
+        )
+    });
+    let status = status_word(p.status);
+    format!(
+        "pair {} {status}: {:.1} % of the grid measured, {:.1} s{scores}",
+        p.stem,
+        100.0 * p.measured_share,
+        p.seconds
+    )
+}
+
+fn status_word(s: PairStatus) -> &'static str {
+    match s {
+        PairStatus::Done => "done",
+        PairStatus::Partial => "partial (tiles failed)",
+        PairStatus::Failed => "FAILED",
+    }
+}
+
+/// The fused DSM's line.
+fn fused_line(s: &ReconstructManySummary, f: &seasonstereo::FusedOutcome) -> String {
+    let cells = (f.grid.width * f.grid.height) as f64;
+    format!(
+        "wrote {} ({}x{} cells of {} m, EPSG:{}; {} pairs fused, {:.1} % measured, {:.1} % with \
+         a height; count {}, spread {}) in {:.1} s",
+        f.dsm.display(),
+        f.grid.width,
+        f.grid.height,
+        f.grid.resolution,
+        f.grid.epsg,
+        f.pairs,
+        100.0 * f.measured_cells as f64 / cells,
+        100.0 * f.filled_cells as f64 / cells,
+        name(&f.count),
+        name(&f.spread),
+        s.seconds
+    )
+}
+
+fn name(p: &Path) -> String {
+    p.file_name().map_or(p.display().to_string(), |n| {
+        n.to_string_lossy().into_owned()
+    })
+}
+
+fn within(w: Option<f64>) -> String {
+    w.map_or(String::new(), |w| {
+        format!(", within 1 m {:.1} %", 100.0 * w)
+    })
+}

@@ -1,0 +1,244 @@
+//! `seasonstereo reconstruct-many` on the DFC2019 development images: pairs chosen, reconstructed,
+//! fused; bad input refused before any work with the inputs untouched.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn seasonstereo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn image(d: &Path, id: &str) -> String {
+    d.join(format!("images/JAX_068_{id}_RGB.tif"))
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+/// Four images, three pairs, on the truth's grid: the fused DSM covers more than any pair
+/// measured, and is accurate.
+#[test]
+fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("fused.tif");
+    let truth = d.join("truth/JAX_068_DSM.tif");
+    let truth = truth.to_str().unwrap();
+    let rpc_dir = d.join("rpcs/ba");
+    let images: Vec<String> = ["003", "004", "013", "014"]
+        .iter()
+        .map(|id| image(&d, id))
+        .collect();
+    let mut args: Vec<&str> = vec!["reconstruct-many"];
+    args.extend(images.iter().map(String::as_str));
+    args.extend([
+        "--rpc-dir",
+        rpc_dir.to_str().unwrap(),
+        "--pairs",
+        "3",
+        "--like",
+        truth,
+        "--truth",
+        truth,
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    // The dry run names the pairs with their terms and writes nothing.
+    let mut dry = args.clone();
+    dry.push("--dry-run");
+    let o = seasonstereo(&dry);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let printed = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        printed.contains("6 overlapping pairs; chosen 3"),
+        "{printed}"
+    );
+    assert!(printed.contains("convergence"), "{printed}");
+    assert!(!out.exists() && !dir.path().join("fused_work").exists());
+
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    for f in ["fused.tif", "fused_count.tif", "fused_spread.tif"] {
+        assert!(dir.path().join(f).is_file(), "{f}\n{stdout}");
+    }
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("fused_report.json")).unwrap(),
+    )
+    .unwrap();
+    let pairs = report["pairs"].as_array().unwrap();
+    assert_eq!(pairs.len(), 3, "{stdout}");
+    let best_pair_coverage = pairs
+        .iter()
+        .map(|p| {
+            assert_eq!(p["status"], "done", "{p}");
+            p["scores"]["coverage"].as_f64().unwrap()
+        })
+        .fold(0.0, f64::max);
+    let coverage = report["scores"]["coverage"].as_f64().unwrap();
+    let mae = report["scores"]["mae_filtered"].as_f64().unwrap();
+    assert!(
+        coverage > best_pair_coverage && coverage > 0.95,
+        "fused {coverage} vs best pair {best_pair_coverage}\n{stdout}"
+    );
+    assert!(mae < 1.3, "fused MAE {mae}\n{stdout}");
+    // The count raster says how many pairs measured each cell (0..=3).
+    let count = raster::read_image(dir.path().join("fused_count.tif")).unwrap();
+    let max = count.data().iter().copied().fold(0.0f32, f32::max);
+    assert_eq!(max, 3.0);
+    assert!(stdout.contains("vs truth: MAE filtered"), "{stdout}");
+    // A rerun resumes: every pair's tiles are finished, none is recomputed.
+    let record = dir.path().join("fused_work/pairs").join(format!(
+        "{}_work/tiles/r000_c000.json",
+        pairs[0]["stem"].as_str().unwrap()
+    ));
+    let before = std::fs::metadata(&record).unwrap().modified().unwrap();
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::metadata(&record).unwrap().modified().unwrap(),
+        before
+    );
+}
+
+/// Pairs that fail are named: exit 2 when the others give a DSM, 3 (nothing written) when none
+/// does. A memory budget that fits one pair's tile and not the other's makes them fail.
+#[test]
+fn failed_pairs_exit_2_when_partial_and_3_when_nothing_is_produced() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let rpc_dir = d.join("rpcs/ba");
+    let images: Vec<String> = ["003", "004", "013"]
+        .iter()
+        .map(|id| image(&d, id))
+        .collect();
+    let run = |memory: &str, name: &str| {
+        let out = dir.path().join(name);
+        let mut args: Vec<&str> = vec!["reconstruct-many"];
+        args.extend(images.iter().map(String::as_str));
+        args.extend(["--rpc-dir", rpc_dir.to_str().unwrap(), "--pairs", "2"]);
+        args.extend(["--max-memory", memory, "-o", out.to_str().unwrap()]);
+        (seasonstereo(&args), out)
+    };
+    // 004–013 needs about 0.8 GiB, 004–003 about 0.95 GiB.
+    let (o, out) = run("0.85", "partial.tif");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(out.is_file() && dir.path().join("partial_count.tif").is_file());
+    assert!(
+        stderr(&o).contains("JAX_068_004_RGB-JAX_068_003_RGB FAILED"),
+        "{}",
+        stderr(&o)
+    );
+    let (o, out) = run("0.3", "none.tif");
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no pair produced a DSM"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists() && !dir.path().join("none_report.json").exists());
+}
+
+fn bytes(paths: &[PathBuf]) -> Vec<Vec<u8>> {
+    paths.iter().map(|p| std::fs::read(p).unwrap()).collect()
+}
+
+/// One image given twice (the same file, or a copy), a missing camera, a single image, an output
+/// that is an input: exit 1 before any work, naming the file, inputs unchanged.
+#[test]
+fn bad_input_is_refused_before_any_work() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let rpc_dir = d.join("rpcs/ba");
+    let rpc = rpc_dir.to_str().unwrap();
+    let (a, b) = (image(&d, "003"), image(&d, "004"));
+    let inputs = [PathBuf::from(&a), PathBuf::from(&b)];
+    let before = bytes(&inputs);
+    let out = dir.path().join("dsm.tif");
+    let o_path = out.to_str().unwrap();
+    let refused = |args: &[&str], needle: &str| {
+        let o = seasonstereo(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
+    };
+    let m = "reconstruct-many";
+    refused(
+        &[m, &a, &b, &a, "--rpc-dir", rpc, "-o", o_path],
+        "the same file",
+    );
+    // A copy of an image under another name (its camera copied too).
+    let copy = dir.path().join("JAX_068_999_RGB.tif");
+    std::fs::copy(&a, &copy).unwrap();
+    let cams = dir.path().join("cams");
+    std::fs::create_dir(&cams).unwrap();
+    for id in ["003", "004", "999"] {
+        let src = rpc_dir.join(format!(
+            "JAX_068_{}_RGB.json",
+            if id == "999" { "003" } else { id }
+        ));
+        std::fs::copy(src, cams.join(format!("JAX_068_{id}_RGB.json"))).unwrap();
+    }
+    let cams = cams.to_str().unwrap();
+    let c = copy.to_str().unwrap();
+    refused(
+        &[m, &a, &b, c, "--rpc-dir", cams, "-o", o_path],
+        "identical pixels",
+    );
+    // A missing camera JSON names the image and the file it looked for.
+    refused(
+        &[m, &a, &b, c, "--rpc-dir", rpc, "-o", o_path],
+        "JAX_068_999_RGB.json",
+    );
+    refused(
+        &[m, &a, "--rpc-dir", rpc, "-o", o_path],
+        "two or more images",
+    );
+    // The output may not be an input.
+    refused(
+        &[m, &a, &b, "--rpc-dir", rpc, "-o", &b],
+        "is the input",
+    );
+    refused(
+        &[m, &a, &b, "--rpc-dir", rpc, "--pairs", "0", "-o", o_path],
+        "--pairs",
+    );
+    // A malformed command line is an error before work too (1, not clap's 2 = partial).
+    refused(&[m, &a, &b, "--no-such-flag"], "--no-such-flag");
+    // An image whose camera puts it 0.05° (5 km) north of the others overlaps none of them.
+    let far = dir.path().join("far");
+    std::fs::create_dir(&far).unwrap();
+    let mut cam: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(rpc_dir.join("JAX_068_005_RGB.json")).unwrap(),
+    )
+    .unwrap();
+    let lat = cam["rpc"]["lat_offset"].as_f64().unwrap();
+    cam["rpc"]["lat_offset"] = serde_json::json!(lat + 0.05);
+    std::fs::write(far.join("JAX_068_005_RGB.json"), cam.to_string()).unwrap();
+    for id in ["003", "004"] {
+        let name = format!("JAX_068_{id}_RGB.json");
+        std::fs::copy(rpc_dir.join(&name), far.join(&name)).unwrap();
+    }
+    let e = image(&d, "005");
+    refused(
+        &[
+            m,
+            &a,
+            &b,
+            &e,
+            "--rpc-dir",
+            far.to_str().unwrap(),
+            "-o",
+            o_path,
+        ],
+        "JAX_068_005_RGB.tif overlaps none of the other images",
+    );
+    assert_eq!(bytes(&inputs), before, "an input changed");
+    assert!(!out.exists() && !dir.path().join("dsm_work").exists());
+}

@@ -1,0 +1,891 @@
+//! Many dates, one DSM: every acquisition of an area → the best pairs by metadata and geometry
+//! ([`super::select`]) → each pair through the tiled [`super::reconstruct`] on one common grid,
+//! without hole filling (the fusion uses measured cells only) → the pairs' DSMs fused cell by
+//! cell ([`super::fuse`]) → holes filled where no cluster had enough agreeing pairs, median filter, the COG.
+//!
+//! Files, for `-o OUT/dsm.tif` (work folder `OUT/dsm_work` unless `work_dir` is given):
+//!
+//! ```text
+//! OUT/dsm.tif                 fused DSM (float32 COG, NaN where nothing measured nor filled)
+//! OUT/dsm_count.tif           pairs that measured each cell
+//! OUT/dsm_spread.tif          median absolute deviation of the kept cluster, metres; NaN where
+//!                             no cluster was kept (the height there, if any, is filled)
+//! OUT/dsm_report.json         chosen pairs and their score terms, per-pair coverage (and scores),
+//!                             fused coverage (and scores), times
+//! OUT/dsm_work/pairs/<pair>.tif       the pair's DSM, measured cells only
+//! OUT/dsm_work/pairs/<pair>_work/     the pair's tiles (resumable: a rerun redoes only
+//!                                     unfinished tiles of unfinished pairs)
+//! ```
+//!
+//! Bad input is refused before any work: fewer than two images, one image given twice (same
+//! file or identical pixels), a missing camera JSON, an image that overlaps no other, an output
+//! that is one of the inputs.
+
+use std::collections::hash_map::DefaultHasher;
+use std::hash::{Hash, Hasher};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use camera::rectify::Roi;
+use camera::{write_dsm, DsmGrid, Gridding, UtmZone};
+use dataset::shard::Shard;
+use raster::Image;
+use serde::Serialize;
+
+use super::fuse::{fuse_files, Fused, FusionParams, Shift};
+use super::raw::RawImage;
+use super::select::{
+    choose_pairs, json_metadata, parse_day, rank_pairs, Acquisition, PairChoice, View,
+};
+use super::tile::TileStatus;
+use super::{footprint, reconstruct, score_against_truth, ReconstructOptions};
+use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+use crate::eval::align::{align, apply, AlignParams};
+use crate::eval::metrics::DsmScores;
+use crate::matcher::Matcher;
+use crate::outputs::{check_output_file, check_output_folder};
+use crate::progress::Progress;
+use crate::rectify::{altitude_range, camera_of, file_stem};
+use crate::stage::write_json;
+
+/// What to reconstruct from many acquisitions, and how.
+#[derive(Clone, Debug)]
+pub struct ReconstructManyOptions {
+    /// The raw images (two or more).
+    pub images: Vec<PathBuf>,
+    /// Folder of the cameras, `<image stem>.json` each (else the images' RPC tags).
+    pub rpc_dir: Option<PathBuf>,
+    /// Output DSM; the count, spread and report files are named after it.
+    pub output: PathBuf,
+    /// Folder of the pairs' DSMs and tiles; `<output without extension>_work` when `None`.
+    pub work_dir: Option<PathBuf>,
+    /// The grid of every pair and of the fused DSM. `Resolution` without bounds: the union of
+    /// the chosen pairs' overlaps.
+    pub grid: GridChoice,
+    /// How many pairs to reconstruct (the best by score).
+    pub pairs: usize,
+    /// Choose and describe the pairs, reconstruct nothing.
+    pub dry_run: bool,
+    /// Heights of one cell further apart than this, metres, are different surfaces
+    /// ([`FusionParams::tolerance`]).
+    pub cluster_tolerance: f32,
+    /// Fewest pairs that must agree for a cell to keep a measured height; `None`:
+    /// [`auto_min_support`] of the pairs fused.
+    pub min_support: Option<usize>,
+    /// Register every pair's DSM on the first pair's (NCC shift, vertical offset) before fusing.
+    pub co_register: bool,
+    /// Hole filling of the fused DSM, cells (only cells without a fused height are filled).
+    pub fill_holes: Option<usize>,
+    /// Median filter of the fused DSM, cells (odd).
+    pub median_filter: Option<usize>,
+    /// Median filter of each pair's DSM before fusion, cells (odd); it never fills a cell.
+    pub pair_median_filter: Option<usize>,
+    /// Ground truth to score the fused DSM and every pair's against (`grid` = `Like` it).
+    pub truth: Option<PathBuf>,
+    /// Scene altitudes, metres (else from the JSONs or the RPCs).
+    pub alt_range: Option<(f64, f64)>,
+    pub matcher: Matcher,
+    pub gridding: Gridding,
+    /// Tiles of each pair: side and collar, pixels.
+    pub tile: usize,
+    pub collar: usize,
+    /// Memory budget of the process, bytes (each pair's tiles, then the fusion).
+    pub max_memory: u64,
+    /// Replace an existing DSM, count, spread or report (atomically). A rerun into the work
+    /// folder of an earlier run of the same output replaces them without it.
+    pub overwrite: bool,
+}
+
+/// Default number of pairs.
+pub const DEFAULT_PAIRS: usize = 12;
+
+impl ReconstructManyOptions {
+    /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_support`], no
+    /// co-registration, fill 40 cells, 7×7 median.
+    pub fn new(
+        images: Vec<PathBuf>,
+        rpc_dir: Option<PathBuf>,
+        matcher: Matcher,
+        grid: GridChoice,
+        output: PathBuf,
+    ) -> Self {
+        ReconstructManyOptions {
+            images,
+            rpc_dir,
+            output,
+            work_dir: None,
+            grid,
+            pairs: DEFAULT_PAIRS,
+            dry_run: false,
+            cluster_tolerance: FusionParams::default().tolerance,
+            min_support: None,
+            co_register: false,
+            fill_holes: Some(DEFAULT_FILL_CELLS),
+            median_filter: Some(DEFAULT_MEDIAN_CELLS),
+            pair_median_filter: None,
+            truth: None,
+            alt_range: None,
+            matcher,
+            gridding: Gridding::Median,
+            tile: 1024,
+            collar: 64,
+            max_memory: 2 << 30,
+            overwrite: false,
+        }
+    }
+
+    /// The folder of the pairs' DSMs and tiles.
+    pub fn work_dir(&self) -> PathBuf {
+        self.work_dir
+            .clone()
+            .unwrap_or_else(|| super::default_work_dir(&self.output))
+    }
+
+    /// `<output stem><suffix>` beside the output.
+    pub fn sibling(&self, suffix: &str) -> PathBuf {
+        let stem = self
+            .output
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "dsm".into());
+        self.output.with_file_name(format!("{stem}{suffix}"))
+    }
+}
+
+/// How a pair's reconstruction ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PairStatus {
+    /// Every tile finished.
+    Done,
+    /// A DSM, but some tiles failed (named in `failed_tiles`).
+    Partial,
+    /// No DSM, or one without a measured cell.
+    Failed,
+}
+
+/// One pair's outcome.
+#[derive(Clone, Debug, Serialize)]
+pub struct PairOutcome {
+    pub stem: String,
+    pub status: PairStatus,
+    pub dsm: PathBuf,
+    pub error: Option<String>,
+    pub failed_tiles: Vec<String>,
+    /// Cells of the grid the pair measured, and their share of the grid.
+    pub measured_cells: usize,
+    pub measured_share: f64,
+    /// Scores of the pair's (unfilled) DSM against the truth.
+    pub scores: Option<DsmScores>,
+    pub within_1m: Option<f64>,
+    /// How the pair's DSM was moved onto the reference pair's before fusion.
+    pub registration: Option<Shift>,
+    pub seconds: f64,
+}
+
+/// The fused DSM's files and cells.
+#[derive(Clone, Debug, Serialize)]
+pub struct FusedOutcome {
+    pub dsm: PathBuf,
+    pub count: PathBuf,
+    pub spread: PathBuf,
+    /// Pairs fused.
+    pub pairs: usize,
+    pub grid: GridRecord,
+    /// Cells with a fused height, cells with a height after filling.
+    pub measured_cells: usize,
+    pub filled_cells: usize,
+    pub seconds: f64,
+}
+
+/// A DSM grid as recorded.
+#[derive(Clone, Debug, Serialize)]
+pub struct GridRecord {
+    pub x0: f64,
+    pub y0: f64,
+    pub resolution: f64,
+    pub width: usize,
+    pub height: usize,
+    pub epsg: u32,
+}
+
+impl From<&DsmGrid> for GridRecord {
+    fn from(g: &DsmGrid) -> Self {
+        GridRecord {
+            x0: g.x0,
+            y0: g.y0,
+            resolution: g.resolution,
+            width: g.width,
+            height: g.height,
+            epsg: g.epsg,
+        }
+    }
+}
+
+/// What [`reconstruct_many`] did (also written as the report).
+#[derive(Clone, Debug, Serialize)]
+pub struct ReconstructManySummary {
+    pub views: Vec<View>,
+    /// Overlapping pairs considered.
+    pub candidates: usize,
+    pub chosen: Vec<PairChoice>,
+    pub pairs: Vec<PairOutcome>,
+    /// The fusion's parameters as used.
+    pub fusion: Option<FusionParams>,
+    pub fused: Option<FusedOutcome>,
+    pub scores: Option<DsmScores>,
+    /// Share of the truth's unmasked cells (foliage and water out) whose registered height is
+    /// within 1 m (a missing cell is a miss).
+    pub within_1m: Option<f64>,
+    pub work: PathBuf,
+    pub report: Option<PathBuf>,
+    pub seconds: f64,
+}
+
+impl ReconstructManySummary {
+    /// Stems of the pairs that failed or lost tiles.
+    pub fn incomplete_pairs(&self) -> Vec<&PairOutcome> {
+        self.pairs
+            .iter()
+            .filter(|p| p.status != PairStatus::Done)
+            .collect()
+    }
+}
+
+/// Chooses the pairs, reconstructs each, fuses them and writes the DSM, its count and spread
+/// rasters and the report. With `dry_run`, only chooses. The steps: `plan` (inputs checked,
+/// pairs chosen, grid), `run_pairs`, `fuse_pairs`, the report.
+pub fn reconstruct_many(
+    opts: &ReconstructManyOptions,
+    progress: &dyn Progress,
+) -> Result<ReconstructManySummary> {
+    let start = Instant::now();
+    let (mut summary, grids) = plan(opts)?;
+    if opts.dry_run {
+        return Ok(summary);
+    }
+    let rows = fusion_rows(&grids.fused, summary.chosen.len(), opts.max_memory)?;
+    let truth = match &opts.truth {
+        Some(t) => Some(crate::score::read_truth(t, grids.fused.zone())?),
+        None => None,
+    };
+    run_pairs(opts, &mut summary, &grids, truth.as_ref(), progress);
+    fuse_pairs(
+        opts,
+        &mut summary,
+        &grids.fused,
+        rows,
+        truth.as_ref(),
+        progress,
+    )?;
+    summary.seconds = start.elapsed().as_secs_f64();
+    if summary.fused.is_some() {
+        let report = opts.sibling("_report.json");
+        write_json(&report, &summary)?;
+        summary.report = Some(report);
+    }
+    Ok(summary)
+}
+
+/// The fused grid, and the choice that gives every pair exactly that grid.
+struct Grids {
+    fused: DsmGrid,
+    pairs: GridChoice,
+}
+
+/// Everything decided before any work: the inputs checked, the views, the chosen pairs and the
+/// grid.
+fn plan(opts: &ReconstructManyOptions) -> Result<(ReconstructManySummary, Grids)> {
+    check_outputs(opts)?;
+    let zone = scene_zone(opts)?;
+    let views = open_views(opts, zone)?;
+    check_distinct(&views)?;
+    check_overlaps(&views)?;
+    let alt = middle_altitude(opts, &views)?;
+    let ranked = rank_pairs(&views, zone, alt)?;
+    let chosen = choose_pairs(&ranked, opts.pairs)?;
+    let (fused, pairs) = common_grid(opts, &chosen, zone)?;
+    let work = opts.work_dir();
+    let summary = ReconstructManySummary {
+        views,
+        candidates: ranked.len(),
+        chosen,
+        pairs: Vec::new(),
+        fusion: None,
+        fused: None,
+        scores: None,
+        within_1m: None,
+        work,
+        report: None,
+        seconds: 0.0,
+    };
+    Ok((summary, Grids { fused, pairs }))
+}
+
+/// Runs every chosen pair through the tiled reconstruction, one after the other; a failing pair
+/// is recorded and the others go on.
+fn run_pairs(
+    opts: &ReconstructManyOptions,
+    summary: &mut ReconstructManySummary,
+    grids: &Grids,
+    truth: Option<&crate::eval::Truth>,
+    progress: &dyn Progress,
+) {
+    for (k, pair) in summary.chosen.iter().enumerate() {
+        let shown = PairProgress {
+            inner: progress,
+            index: k,
+            total: summary.chosen.len(),
+            steps: std::sync::atomic::AtomicUsize::new(1),
+        };
+        let pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
+        let mut outcome = run_pair(&pair_opts, &grids.fused, &pair.stem, &shown);
+        if let (Some(t), Some(s)) = (truth, &outcome.scores) {
+            outcome.within_1m = within_1m(&outcome.dsm, t, s).ok().flatten();
+        }
+        summary.pairs.push(outcome);
+    }
+}
+
+/// Fuses the DSMs of the pairs that produced one (registered on the first when asked), writes
+/// the fused files and scores them; nothing when no pair produced a DSM.
+fn fuse_pairs(
+    opts: &ReconstructManyOptions,
+    summary: &mut ReconstructManySummary,
+    grid: &DsmGrid,
+    rows: usize,
+    truth: Option<&crate::eval::Truth>,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let t = Instant::now();
+    let fusable: Vec<usize> = (0..summary.pairs.len())
+        .filter(|&i| summary.pairs[i].status != PairStatus::Failed)
+        .collect();
+    let Some(&first) = fusable.first() else {
+        return Ok(());
+    };
+    let reference = summary.pairs[first].dsm.clone();
+    let mut layers = Vec::with_capacity(fusable.len());
+    for &i in &fusable {
+        let p = &mut summary.pairs[i];
+        let shift = if opts.co_register {
+            co_register(&reference, &p.dsm, grid)?
+        } else {
+            Shift::default()
+        };
+        p.registration = Some(shift);
+        layers.push((p.dsm.clone(), shift));
+    }
+    let params = FusionParams {
+        tolerance: opts.cluster_tolerance,
+        min_support: opts
+            .min_support
+            .unwrap_or_else(|| auto_min_support(layers.len())),
+    };
+    summary.fusion = Some(params);
+    let fused = fuse_files(&layers, grid, rows, &params, progress)?;
+    summary.fused = Some(write_fused(opts, fused, grid, layers.len(), t)?);
+    if let (Some(path), Some(truth)) = (&opts.truth, truth) {
+        let scores = score_against_truth(&opts.output, path, grid)?;
+        summary.within_1m = within_1m(&opts.output, truth, &scores)?;
+        summary.scores = Some(scores);
+    }
+    Ok(())
+}
+
+/// The default agreement of a fusion of `pairs` DSMs: at least 2 pairs (a height that only one
+/// pair measured is too often a mismatch), a quarter of them from 12 pairs on, never more than
+/// there are pairs. On the dev set (12 pairs, 1 m clusters) 1, 2, 3, 4 agreeing pairs gave 1.42,
+/// 1.05, 0.93, 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
+pub fn auto_min_support(pairs: usize) -> usize {
+    (pairs.div_ceil(4)).max(2).min(pairs.max(1))
+}
+
+/// Shows each pair's tiles as one stretch of a bar over all pairs.
+struct PairProgress<'a> {
+    inner: &'a dyn Progress,
+    index: usize,
+    total: usize,
+    /// Steps of the pair's current loop.
+    steps: std::sync::atomic::AtomicUsize,
+}
+
+/// Positions of a bar per pair.
+const PAIR_SCALE: usize = 1000;
+
+impl Progress for PairProgress<'_> {
+    fn begin(&self, _label: &str, total: usize) {
+        self.steps
+            .store(total.max(1), std::sync::atomic::Ordering::Relaxed);
+        self.inner.begin(
+            &format!("pairs ({}/{})", self.index + 1, self.total),
+            self.total * PAIR_SCALE,
+        );
+        self.inner.advance(self.index * PAIR_SCALE);
+    }
+    fn advance(&self, done: usize) {
+        let steps = self.steps.load(std::sync::atomic::Ordering::Relaxed);
+        self.inner
+            .advance(self.index * PAIR_SCALE + done.min(steps) * PAIR_SCALE / steps);
+    }
+    fn end(&self) {
+        self.inner.end();
+    }
+}
+
+/// The options of one pair's tiled reconstruction.
+fn pair_options(
+    opts: &ReconstructManyOptions,
+    views: &[View],
+    pair: &PairChoice,
+    grid: &GridChoice,
+    work: &Path,
+) -> ReconstructOptions {
+    let (l, r) = (&views[pair.left], &views[pair.right]);
+    let dir = work.join("pairs");
+    let mut o = ReconstructOptions::new(
+        l.image.clone(),
+        r.image.clone(),
+        opts.matcher.clone(),
+        grid.clone(),
+        dir.join(format!("{}.tif", pair.stem)),
+    );
+    o.rpc_left = l.rpc_file.clone();
+    o.rpc_right = r.rpc_file.clone();
+    o.alt_range = opts.alt_range;
+    o.work_dir = Some(dir.join(format!("{}_work", pair.stem)));
+    o.gridding = opts.gridding;
+    o.fill_holes = None;
+    o.median_filter = opts.pair_median_filter;
+    o.truth = opts.truth.clone();
+    o.tile = opts.tile;
+    o.collar = opts.collar;
+    o.max_memory = opts.max_memory;
+    o.shard = Shard::ALL;
+    o
+}
+
+/// Runs one pair; a failure is recorded, not returned.
+fn run_pair(
+    o: &ReconstructOptions,
+    grid: &DsmGrid,
+    stem: &str,
+    progress: &dyn Progress,
+) -> PairOutcome {
+    let t = Instant::now();
+    let mut out = PairOutcome {
+        stem: stem.to_string(),
+        status: PairStatus::Failed,
+        dsm: o.output.clone(),
+        error: None,
+        failed_tiles: Vec::new(),
+        measured_cells: 0,
+        measured_share: 0.0,
+        scores: None,
+        within_1m: None,
+        registration: None,
+        seconds: 0.0,
+    };
+    match reconstruct(o, progress) {
+        Err(e) => out.error = Some(format!("{e:#}")),
+        Ok(s) => {
+            out.failed_tiles = s
+                .records
+                .iter()
+                .filter(|r| r.status == TileStatus::Failed)
+                .map(|r| r.tile.id.clone())
+                .collect();
+            match s.dsm {
+                Some(d) if d.measured_cells > 0 => {
+                    out.measured_cells = d.measured_cells;
+                    out.measured_share =
+                        d.measured_cells as f64 / (grid.width * grid.height) as f64;
+                    out.status = if out.failed_tiles.is_empty() {
+                        PairStatus::Done
+                    } else {
+                        PairStatus::Partial
+                    };
+                    out.scores = s.scores;
+                }
+                Some(_) => out.error = Some("no cell of the grid was measured".into()),
+                None => out.error = Some("the DSM was not assembled".into()),
+            }
+        }
+    }
+    out.seconds = t.elapsed().as_secs_f64();
+    out
+}
+
+/// Fills (where no cluster was kept), filters and writes the fused DSM, its count and spread.
+fn write_fused(
+    opts: &ReconstructManyOptions,
+    fused: Fused,
+    grid: &DsmGrid,
+    pairs: usize,
+    t: Instant,
+) -> Result<FusedOutcome> {
+    let (w, h) = (grid.width, grid.height);
+    let measured_cells = fused.measured();
+    let count = Image::new(w, h, 1, fused.counts.iter().map(|&c| c as f32).collect())?;
+    let spread = Image::new(w, h, 1, fused.spreads)?;
+    let (count_path, spread_path) = (opts.sibling("_count.tif"), opts.sibling("_spread.tif"));
+    write_dsm(&count_path, &count, grid)
+        .with_context(|| format!("writing {}", count_path.display()))?;
+    drop(count);
+    write_dsm(&spread_path, &spread, grid)
+        .with_context(|| format!("writing {}", spread_path.display()))?;
+    drop(spread);
+    let dsm = Image::new(w, h, 1, fused.heights)?;
+    let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
+    write_dsm(&opts.output, &dsm, grid)
+        .with_context(|| format!("writing {}", opts.output.display()))?;
+    Ok(FusedOutcome {
+        dsm: opts.output.clone(),
+        count: count_path,
+        spread: spread_path,
+        pairs,
+        grid: grid.into(),
+        measured_cells,
+        filled_cells: dsm.data().iter().filter(|v| v.is_finite()).count(),
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Side of the central window two pairs' DSMs are registered on, cells.
+const REGISTRATION_WINDOW: usize = 1024;
+
+/// The shift and offset that register the DSM at `path` on the `reference` DSM (both on `grid`),
+/// estimated on a central window; none when they share no cell there.
+fn co_register(reference: &Path, path: &Path, grid: &DsmGrid) -> Result<Shift> {
+    if reference == path {
+        return Ok(Shift::default());
+    }
+    let (w, h) = (
+        grid.width.min(REGISTRATION_WINDOW),
+        grid.height.min(REGISTRATION_WINDOW),
+    );
+    let (x0, y0) = ((grid.width - w) / 2, (grid.height - h) / 2);
+    let read = |p: &Path| -> Result<Image> {
+        let mut r = raster::formats::TiffReader::open(p)
+            .with_context(|| format!("opening {}", p.display()))?;
+        Ok(r.read_window(x0, y0, w, h)?)
+    };
+    let (a, b) = (read(reference)?, read(path)?);
+    Ok(
+        align(&a, &b, &AlignParams::default()).map_or(Shift::default(), |al| Shift {
+            dx: al.dx,
+            dy: al.dy,
+            offset: al.offset as f32,
+        }),
+    )
+}
+
+/// Share of the truth's unmasked cells whose height, after the filtered score's registration,
+/// is within 1 m of the truth (a missing cell counts as a miss); `None` without registration.
+fn within_1m(dsm: &Path, truth: &crate::eval::Truth, s: &DsmScores) -> Result<Option<f64>> {
+    let Some(offset) = s.offset else {
+        return Ok(None);
+    };
+    let pred = camera::read_dsm(dsm, Some(truth.grid.zone()))?.image;
+    let aligned = apply(&pred, s.dx, s.dy, offset);
+    let ex = &truth.exclusions;
+    let (mut cells, mut hits) = (0usize, 0usize);
+    for (i, (&g, &p)) in truth.dsm.data().iter().zip(aligned.data()).enumerate() {
+        if !g.is_finite() || ex.water.data()[i] || ex.foliage.data()[i] {
+            continue;
+        }
+        cells += 1;
+        hits += ((g - p).abs() <= 1.0) as usize;
+    }
+    Ok((cells > 0).then(|| hits as f64 / cells as f64))
+}
+
+/// The UTM zone of the scene: the grid's when given, else the first camera's.
+fn scene_zone(opts: &ReconstructManyOptions) -> Result<UtmZone> {
+    if let GridChoice::Resolution {
+        epsg: Some(code), ..
+    } = &opts.grid
+    {
+        return Ok(UtmZone::from_epsg(*code)?);
+    }
+    let first = &opts.images[0];
+    let raw = RawImage::open(first, "first")?;
+    let rpc = camera_of(
+        first,
+        raw.rpc.clone(),
+        rpc_json(opts, first)?.as_deref(),
+        "first",
+    )?;
+    Ok(UtmZone::from_lonlat(rpc.lon_offset, rpc.lat_offset))
+}
+
+/// `DIR/<image stem>.json` when `--rpc-dir` is given; an error naming both when it is missing.
+fn rpc_json(opts: &ReconstructManyOptions, image: &Path) -> Result<Option<PathBuf>> {
+    let Some(dir) = &opts.rpc_dir else {
+        return Ok(None);
+    };
+    let json = dir.join(format!("{}.json", file_stem(image)?));
+    if !json.is_file() {
+        bail!(
+            "{}: its camera {} does not exist: put the image's SatNeRF/rpcm JSON there (named \
+             after the image), or leave the image out",
+            image.display(),
+            json.display()
+        );
+    }
+    Ok(Some(json))
+}
+
+/// Opens every image and its camera, metadata and footprint.
+fn open_views(opts: &ReconstructManyOptions, zone: UtmZone) -> Result<Vec<View>> {
+    if opts.images.len() < 2 {
+        bail!(
+            "reconstruct-many needs two or more images of the area, got {}{}: give every \
+             acquisition (or use `reconstruct` for one pair)",
+            opts.images.len(),
+            opts.images
+                .first()
+                .map_or(String::new(), |p| format!(" ({})", p.display()))
+        );
+    }
+    let mut views = Vec::with_capacity(opts.images.len());
+    for image in &opts.images {
+        let raw = RawImage::open(image, "input")?;
+        let json = rpc_json(opts, image)?;
+        let rpc = camera_of(image, raw.rpc.clone(), json.as_deref(), "input")?;
+        let Acquisition { date, sun } = match &json {
+            Some(j) => json_metadata(j)?,
+            None => Acquisition::default(),
+        };
+        let (alt_range, _) = altitude_range(opts.alt_range, &rpc, &rpc)?;
+        let (w, h) = raw.size();
+        let fp = footprint(&rpc, Roi::full(w, h), alt_range, zone)
+            .with_context(|| format!("the ground footprint of {}", image.display()))?;
+        views.push(View {
+            image: image.clone(),
+            rpc_file: json,
+            day: date.as_deref().and_then(parse_day),
+            date,
+            sun,
+            footprint: fp,
+            rpc,
+        });
+    }
+    Ok(views)
+}
+
+/// The middle of the scene's altitudes (the user's, else the cameras').
+fn middle_altitude(opts: &ReconstructManyOptions, views: &[View]) -> Result<f64> {
+    let (lo, hi) = altitude_range(opts.alt_range, &views[0].rpc, &views[1].rpc)?.0;
+    Ok(0.5 * (lo + hi))
+}
+
+/// Refuses one image given twice: the same file, or the same pixels under another name (only
+/// images of the same size are read to compare their pixels).
+fn check_distinct(views: &[View]) -> Result<()> {
+    let canon: Vec<PathBuf> = views
+        .iter()
+        .map(|v| std::fs::canonicalize(&v.image).unwrap_or_else(|_| v.image.clone()))
+        .collect();
+    let sizes: Vec<(usize, usize)> = views
+        .iter()
+        .map(|v| RawImage::open(&v.image, "input").map(|r| r.size()))
+        .collect::<Result<_>>()?;
+    let mut hashes: Vec<Option<u64>> = vec![None; views.len()];
+    let mut hash = |i: usize| -> Result<u64> {
+        if hashes[i].is_none() {
+            hashes[i] = Some(pixel_hash(&views[i].image)?);
+        }
+        Ok(hashes[i].expect("just set"))
+    };
+    for i in 0..views.len() {
+        for j in i + 1..views.len() {
+            let why = if canon[i] == canon[j] {
+                "the same file"
+            } else if sizes[i] == sizes[j] && hash(i)? == hash(j)? {
+                "identical pixels"
+            } else {
+                continue;
+            };
+            bail!(
+                "{} and {} are the same acquisition ({why}): give each image once",
+                views[i].image.display(),
+                views[j].image.display(),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A hash of an image's pixels, read by strips of rows.
+fn pixel_hash(path: &Path) -> Result<u64> {
+    let raw = RawImage::open(path, "input")?;
+    let (w, h) = raw.size();
+    let mut hasher = DefaultHasher::new();
+    const STRIP: usize = 256;
+    for y in (0..h).step_by(STRIP) {
+        let strip = raw.window(0, y, w, STRIP.min(h - y))?;
+        for v in strip.data() {
+            v.to_bits().hash(&mut hasher);
+        }
+    }
+    Ok(hasher.finish())
+}
+
+/// Refuses an image whose footprint meets no other image's.
+fn check_overlaps(views: &[View]) -> Result<()> {
+    for (i, v) in views.iter().enumerate() {
+        let alone = views
+            .iter()
+            .enumerate()
+            .all(|(j, o)| j == i || super::select::intersect(v.footprint, o.footprint).is_none());
+        if alone {
+            bail!(
+                "{} overlaps none of the other images (its ground footprint, UTM {:.0}..{:.0} E, \
+                 {:.0}..{:.0} N, meets no other): leave it out, or check its camera",
+                v.image.display(),
+                v.footprint[0],
+                v.footprint[2],
+                v.footprint[1],
+                v.footprint[3]
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Refuses outputs that are inputs, and `--truth` without its grid.
+fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
+    let mut inputs: Vec<PathBuf> = opts.images.clone();
+    if let Some(dir) = &opts.rpc_dir {
+        for image in &opts.images {
+            if let Ok(stem) = file_stem(image) {
+                inputs.push(dir.join(format!("{stem}.json")));
+            }
+        }
+    }
+    if let GridChoice::Like(p) = &opts.grid {
+        inputs.push(p.clone());
+    }
+    inputs.extend(opts.truth.iter().cloned());
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    // A rerun into the work folder of an earlier run of this output resumes it and rewrites its
+    // products.
+    let overwrite = opts.overwrite || opts.dry_run || opts.work_dir().is_dir();
+    for (flag, out) in [
+        ("-o", opts.output.clone()),
+        ("the count raster", opts.sibling("_count.tif")),
+        ("the spread raster", opts.sibling("_spread.tif")),
+        ("the report", opts.sibling("_report.json")),
+    ] {
+        check_output_file(flag, &out, &inputs, overwrite)?;
+    }
+    check_output_folder("--work", &opts.work_dir(), &inputs, false)?;
+    let canon = |p: &Path| std::fs::canonicalize(p).ok();
+    if let (Some(t), GridChoice::Like(l)) = (&opts.truth, &opts.grid) {
+        if canon(t) != canon(l) {
+            bail!(
+                "--truth {} must be the DSM given to --like (the scores need its grid)",
+                t.display()
+            );
+        }
+    } else if opts.truth.is_some() {
+        bail!("--truth needs --like on the same file (the scores need its grid)");
+    }
+    Ok(())
+}
+
+/// The fused grid, and the grid choice that gives every pair exactly that grid.
+fn common_grid(
+    opts: &ReconstructManyOptions,
+    chosen: &[PairChoice],
+    zone: UtmZone,
+) -> Result<(DsmGrid, GridChoice)> {
+    match &opts.grid {
+        GridChoice::Like(p) => {
+            let grid = DsmGrid::read(p, Some(zone))
+                .with_context(|| format!("reading the grid of {}", p.display()))?;
+            Ok((grid, opts.grid.clone()))
+        }
+        GridChoice::Resolution {
+            resolution, bounds, ..
+        } => {
+            let b = bounds.unwrap_or_else(|| union_bounds(chosen, *resolution));
+            let grid = DsmGrid::from_bounds(b[0], b[1], b[2], b[3], *resolution, zone.epsg())?;
+            let choice = GridChoice::Resolution {
+                resolution: *resolution,
+                bounds: Some(b),
+                epsg: Some(zone.epsg()),
+            };
+            Ok((grid, choice))
+        }
+    }
+}
+
+/// The union of the pairs' overlaps, snapped outwards to multiples of `resolution` (as GDAL's
+/// `-tap`).
+fn union_bounds(chosen: &[PairChoice], resolution: f64) -> [f64; 4] {
+    let u = chosen.iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |u, p| {
+            let o = p.overlap;
+            [
+                u[0].min(o[0]),
+                u[1].min(o[1]),
+                u[2].max(o[2]),
+                u[3].max(o[3]),
+            ]
+        },
+    );
+    let snap = |v: f64, up: bool| {
+        let k = v / resolution;
+        resolution * if up { k.ceil() } else { k.floor() }
+    };
+    [
+        snap(u[0], false),
+        snap(u[1], false),
+        snap(u[2], true),
+        snap(u[3], true),
+    ]
+}
+
+/// Bytes per fused cell held at once: heights, counts, spreads, and the filled and filtered
+/// copies of the heights.
+const FUSE_BYTES_PER_CELL: u64 = 22;
+
+/// Rows of each pair read at once, refused when the fused grid does not fit the budget.
+fn fusion_rows(grid: &DsmGrid, pairs: usize, max_memory: u64) -> Result<usize> {
+    let cells = (grid.width * grid.height) as u64;
+    let held = cells * FUSE_BYTES_PER_CELL;
+    if held + super::PROCESS_BYTES > max_memory {
+        bail!(
+            "fusing the {}x{}-cell DSM needs about {:.2} GiB, more than --max-memory {:.2} GiB: \
+             use a coarser --resolution or raise --max-memory",
+            grid.width,
+            grid.height,
+            super::gib(held),
+            super::gib(max_memory)
+        );
+    }
+    // A block of every pair (read buffer and copy) in an eighth of what is left, 16 rows at least.
+    let left = (max_memory - held - super::PROCESS_BYTES) / 8;
+    let per_row = (grid.width * pairs.max(1) * 8) as u64;
+    Ok(((left / per_row.max(1)) as usize).clamp(16, grid.height.max(16)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn agreement_grows_with_the_pairs_but_never_beyond_them() {
+        let m: Vec<usize> = [1, 2, 3, 8, 12, 16, 20].map(auto_min_support).to_vec();
+        assert_eq!(m, vec![1, 2, 2, 2, 3, 4, 5]);
+    }
+}
