@@ -1,24 +1,49 @@
 //! `seasonstereo score`: the benchmark's metric on any DSM against a ground truth.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use seasonstereo::{read_truth, score, DsmScores};
+use seasonstereo::{read_truth, score, score_against, CellsMae, DsmScores, Truth, Versus};
+
+/// A share as a percentage, `-` when undefined.
+fn percent(v: Option<f64>) -> String {
+    v.map_or("-".into(), |c| format!("{:.1} %", 100.0 * c))
+}
+
+/// Metres, `-` when undefined.
+fn metres(v: Option<f64>) -> String {
+    v.map_or("-".into(), |v| format!("{v:.3} m"))
+}
 
 /// One line with the benchmark's scores.
 pub fn format_scores(s: &DsmScores) -> String {
-    let m = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3} m"));
     format!(
-        "MAE filtered {} (raw {}, no water {}), coverage {}, shift {},{} cells, offset {}",
-        m(s.mae_filtered),
-        m(s.mae_raw),
-        m(s.mae_no_water),
-        s.coverage
-            .map_or("-".into(), |c| format!("{:.1} %", 100.0 * c)),
+        "MAE filtered {} (raw {}, no water {}), coverage {}, shift {},{} cells, offset {}, \
+         within 1 m {}, within 2 m {}",
+        metres(s.mae_filtered),
+        metres(s.mae_raw),
+        metres(s.mae_no_water),
+        percent(s.coverage),
         s.dx,
         s.dy,
-        s.offset.map_or("-".into(), |o| format!("{o:+.3} m"))
+        s.offset.map_or("-".into(), |o| format!("{o:+.3} m")),
+        percent(s.within_1m),
+        percent(s.within_2m),
+    )
+}
+
+/// The comparison's line: both MAEs on the common cells, then each one's own cells.
+fn format_versus(v: &Versus) -> String {
+    let own = |c: &CellsMae| format!("{} over {} cells", metres(c.mae), c.cells);
+    format!(
+        "common cells {}: ours {}, other {}; only ours: {}; only other: {}; neither: {} cells",
+        v.common_ours.cells,
+        metres(v.common_ours.mae),
+        metres(v.common_other.mae),
+        own(&v.only_ours),
+        own(&v.only_other),
+        v.neither
     )
 }
 
@@ -28,7 +53,13 @@ pub fn format_scores(s: &DsmScores) -> String {
     from `reconstruct --like`, `dsm --like`, or s2p): integer (dx, dy) shift within ±5 cells \
     maximising NCC, vertical offset b = mean(truth) − mean(DSM), MAE over cells where both exist \
     (filtered: without foliage 5 and water 9 of <AOI>_CLS.tif), coverage = share of truth cells \
-    with a value."
+    with a value, within 1 m / 2 m = share of the truth cells outside foliage and water whose \
+    registered height is within 1 m / 2 m (a missing cell is a miss: the figure rewards \
+    coverage and accuracy at once).\n\n\
+    With --against OTHER each DSM and OTHER (e.g. s2p's DSM cut onto the truth grid) are \
+    registered on their own, then compared cell by cell: the MAE of each on the truth cells \
+    both cover (the fair ranking), the MAE of the cells only one covers, and the cells neither \
+    covers."
 )]
 pub struct ScoreArgs {
     /// DSMs to score (GeoTIFF on the truth's grid).
@@ -42,7 +73,13 @@ pub struct ScoreArgs {
     /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
     #[arg(long, value_name = "ZONE", value_parser = parse_zone)]
     utm_zone: Option<camera::UtmZone>,
-    /// Write the scores as JSON lines to this file too.
+    /// Compare each DSM with this one (another method's DSM on the truth's grid) on the cells
+    /// both cover and on those only one covers.
+    #[arg(long, value_name = "DSM")]
+    against: Option<PathBuf>,
+    /// Write the scores as JSON lines to this file too (with --against, one comparison per
+    /// line: `ours`, `other`, `common_ours`, `common_other`, `only_ours`, `only_other`,
+    /// `neither`).
     #[arg(long)]
     json: Option<PathBuf>,
 }
@@ -93,9 +130,10 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     let truth = read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {
-        let s = score(path, &truth)?;
-        println!("{}: {}", path.display(), format_scores(&s));
-        let mut v = serde_json::to_value(&s)?;
+        let mut v = match &a.against {
+            Some(other) => score_one_against(path, other, &truth)?,
+            None => score_one(path, &truth)?,
+        };
         v["dsm"] = serde_json::Value::String(path.display().to_string());
         lines.push_str(&v.to_string());
         lines.push('\n');
@@ -104,4 +142,27 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         pipeline::stage::write_text(j, &lines)?;
     }
     Ok(())
+}
+
+/// Prints one DSM's scores; its JSON record.
+fn score_one(path: &Path, truth: &Truth) -> Result<serde_json::Value> {
+    let s = score(path, truth)?;
+    println!("{}: {}", path.display(), format_scores(&s));
+    Ok(serde_json::to_value(&s)?)
+}
+
+/// Prints a DSM's and the other's scores and their comparison; the comparison's JSON record.
+fn score_one_against(path: &Path, other: &Path, truth: &Truth) -> Result<serde_json::Value> {
+    let v = score_against(path, other, truth)?;
+    println!("{}: {}", path.display(), format_scores(&v.ours));
+    println!("{}: {}", other.display(), format_scores(&v.other));
+    println!(
+        "{} vs {}: {}",
+        path.display(),
+        other.display(),
+        format_versus(&v)
+    );
+    let mut j = serde_json::to_value(&v)?;
+    j["against"] = serde_json::Value::String(other.display().to_string());
+    Ok(j)
 }

@@ -201,10 +201,7 @@ fn bad_input_is_refused_before_any_work() {
         "two or more images",
     );
     // The output may not be an input.
-    refused(
-        &[m, &a, &b, "--rpc-dir", rpc, "-o", &b],
-        "is the input",
-    );
+    refused(&[m, &a, &b, "--rpc-dir", rpc, "-o", &b], "is the input");
     refused(
         &[m, &a, &b, "--rpc-dir", rpc, "--pairs", "0", "-o", o_path],
         "--pairs",

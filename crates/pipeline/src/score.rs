@@ -1,6 +1,7 @@
 //! Scoring a DSM file against a ground truth with the benchmark's metric (registration by an
 //! integer NCC shift and a vertical offset, foliage and water masked), whoever made the DSM:
-//! `seasonstereo reconstruct`, `dsm`, or another tool such as s2p, on the truth's grid.
+//! `seasonstereo reconstruct`, `dsm`, or another tool such as s2p, on the truth's grid; and
+//! two DSMs against each other on the cells both cover ([`score_versus_files`]).
 
 use std::path::Path;
 
@@ -9,6 +10,7 @@ use camera::{DsmRaster, UtmZone};
 
 use crate::eval::layout::TruthFiles;
 use crate::eval::metrics::{score_dsm, DsmScores};
+use crate::eval::versus::{score_versus, Versus};
 use crate::eval::Truth;
 
 /// The truth of a `<AOI>_DSM.tif` path: the DSM, and the `<AOI>_CLS.tif` and `<AOI>_WATER.png`
@@ -35,6 +37,23 @@ pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
 
 /// Scores the DSM at `path` (on the truth's grid) against `truth`.
 pub fn score_dsm_file(path: &Path, truth: &Truth) -> Result<DsmScores> {
+    let image = read_on_truth_grid(path, truth)?;
+    score_dsm(&image, &truth.dsm, &truth.exclusions, &Default::default())
+        .with_context(|| format!("scoring {}", path.display()))
+}
+
+/// Scores the DSMs at `ours` and `other` (both on the truth's grid) against `truth`, each
+/// registered on its own, and compares them on the cells both cover and on those only one
+/// covers ([`crate::eval::versus`]).
+pub fn score_versus_files(ours: &Path, other: &Path, truth: &Truth) -> Result<Versus> {
+    let a = read_on_truth_grid(ours, truth)?;
+    let b = read_on_truth_grid(other, truth)?;
+    score_versus(&a, &b, &truth.dsm, &truth.exclusions, &Default::default())
+        .with_context(|| format!("scoring {} against {}", ours.display(), other.display()))
+}
+
+/// The heights of the DSM at `path`, refused unless it lies on the truth's grid.
+fn read_on_truth_grid(path: &Path, truth: &Truth) -> Result<raster::Image> {
     let zone = truth.grid.zone();
     let DsmRaster { image, grid, .. } = camera::read_dsm(path, Some(zone))
         .with_context(|| format!("reading the DSM {}", path.display()))?;
@@ -51,6 +70,5 @@ pub fn score_dsm_file(path: &Path, truth: &Truth) -> Result<DsmScores> {
             truth.aoi
         );
     }
-    score_dsm(&image, &truth.dsm, &truth.exclusions, &Default::default())
-        .with_context(|| format!("scoring {}", path.display()))
+    Ok(image)
 }

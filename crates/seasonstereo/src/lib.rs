@@ -14,6 +14,7 @@
 //! | raw pair → DSM, tiled, resumable | [`reconstruct`] | [`ReconstructOptions`] → [`ReconstructSummary`] |
 //! | many dates → best pairs → one fused DSM | [`reconstruct_many`] | [`ReconstructManyOptions`] → [`ReconstructManySummary`] |
 //! | DSM → benchmark scores | [`score`] | [`Truth`] → [`DsmScores`] |
+//! | two DSMs → scores on the cells both cover | [`score_against`] | [`Truth`] → [`Versus`] |
 //! | disparities of a split → Table 1 | [`eval`] | [`EvalOptions`] → [`EvalReport`] |
 //! | the training set | [`stages`] | teacher → curate → synthesize → masks → dataset build |
 //!
@@ -51,7 +52,7 @@ pub use camera::{DsmGrid, Gridding, RpcModel, UtmZone};
 pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
 pub use pipeline::eval::metrics::DsmScores;
-pub use pipeline::eval::{EvalOptions, EvalReport, Truth};
+pub use pipeline::eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
 #[cfg(feature = "network")]
 pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
@@ -141,6 +142,15 @@ pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
 /// water, without foliage and water) and the truth's coverage.
 pub fn score(dsm: &Path, truth: &Truth) -> Result<DsmScores> {
     pipeline::score::score_dsm_file(dsm, truth)
+}
+
+/// Two DSMs already on the truth's grid ("ours" and another method's, e.g. s2p's) scored by the
+/// benchmark's metric, each registered on its own, then compared cell by cell: the MAE of each
+/// on the truth cells both cover, the MAE of the cells only one covers, and each one's coverage
+/// and share of truth cells within 1 m and 2 m. Two MAEs over different cells do not rank two
+/// methods (holes fall where matching is hard); these do.
+pub fn score_against(dsm: &Path, other: &Path, truth: &Truth) -> Result<Versus> {
+    pipeline::score::score_versus_files(dsm, other, truth)
 }
 
 /// Altitude MAE of the DSMs from the disparities of one or more splits, exactly as the

@@ -132,6 +132,13 @@ pub struct DsmScores {
     /// score's registration (`None` when the ground truth has no finite cell). The release does
     /// not compute it.
     pub coverage: Option<f64>,
+    /// Share of the ground truth's finite cells outside water and foliage whose height after
+    /// `mae_filtered`'s registration is within 1 m of the truth; a cell without a prediction
+    /// counts as a miss, so the figure rewards coverage and accuracy at once (`None` when no
+    /// such truth cell exists). The release does not compute it.
+    pub within_1m: Option<f64>,
+    /// The same within 2 m.
+    pub within_2m: Option<f64>,
     /// The registration of `mae_filtered` (0, 0 and `None` without overlap).
     pub dx: i32,
     pub dy: i32,
@@ -202,6 +209,20 @@ fn score_one(
     )
 }
 
+/// Share of the finite cells of `gt` where `aligned` is within `tolerance` metres (a NaN
+/// prediction is a miss); `None` when `gt` has no finite cell.
+fn within(gt: &Image, aligned: Option<&Image>, tolerance: f32) -> Option<f64> {
+    let total = gt.data().iter().filter(|g| g.is_finite()).count();
+    let hits = aligned.map_or(0, |al| {
+        gt.data()
+            .iter()
+            .zip(al.data())
+            .filter(|(g, p)| g.is_finite() && (**g - **p).abs() <= tolerance)
+            .count()
+    });
+    (total > 0).then(|| hits as f64 / total as f64)
+}
+
 /// Scores `pred` against `gt`. Both are single-channel rasters on the same grid (NaN = no data);
 /// `exclusions` are on that grid too.
 pub fn score_dsm(
@@ -210,6 +231,25 @@ pub fn score_dsm(
     exclusions: &Exclusions,
     params: &ScoreParams,
 ) -> Result<DsmScores, raster::RasterError> {
+    Ok(score_dsm_registered(pred, gt, exclusions, params)?.scores)
+}
+
+/// A DSM scored, with what the filtered score compared: the truth with water and foliage
+/// masked, and the prediction after the filtered score's registration (`None` without overlap).
+#[derive(Clone, Debug)]
+pub struct Registered {
+    pub scores: DsmScores,
+    pub truth_filtered: Image,
+    pub aligned: Option<Image>,
+}
+
+/// [`score_dsm`], keeping the registered prediction (for comparisons cell by cell).
+pub fn score_dsm_registered(
+    pred: &Image,
+    gt: &Image,
+    exclusions: &Exclusions,
+    params: &ScoreParams,
+) -> Result<Registered, raster::RasterError> {
     pred.check_same_size(gt, "predicted and ground-truth DSM")?;
     gt.check_mask(&exclusions.water, "ground-truth DSM and water mask")?;
     gt.check_mask(&exclusions.foliage, "ground-truth DSM and foliage mask")?;
@@ -231,7 +271,7 @@ pub fn score_dsm(
         })),
     };
     let (no_water, _) = score_one(&pred, &no_water, shared, a);
-    let (filtered, _) = score_one(&pred, &filtered, shared, a);
+    let (filtered_score, filtered_aligned) = score_one(&pred, &filtered, shared, a);
     let covered = aligned.map_or(0, |al| {
         gt.data()
             .iter()
@@ -239,17 +279,24 @@ pub fn score_dsm(
             .filter(|(g, p)| g.is_finite() && p.is_finite())
             .count()
     });
-    Ok(DsmScores {
+    let scores = DsmScores {
         mae_raw: raw.mae,
         mae_no_water: no_water.mae,
-        mae_filtered: filtered.mae,
+        mae_filtered: filtered_score.mae,
         coverage: (gt_cells > 0).then(|| covered as f64 / gt_cells as f64),
-        dx: filtered.dx.unwrap_or(0),
-        dy: filtered.dy.unwrap_or(0),
-        offset: filtered.offset,
-        cells: filtered.cells,
+        within_1m: within(&filtered, filtered_aligned.as_ref(), 1.0),
+        within_2m: within(&filtered, filtered_aligned.as_ref(), 2.0),
+        dx: filtered_score.dx.unwrap_or(0),
+        dy: filtered_score.dy.unwrap_or(0),
+        offset: filtered_score.offset,
+        cells: filtered_score.cells,
         raw,
         no_water,
-        filtered,
+        filtered: filtered_score,
+    };
+    Ok(Registered {
+        scores,
+        truth_filtered: filtered,
+        aligned: filtered_aligned,
     })
 }

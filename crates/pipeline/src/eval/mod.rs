@@ -55,6 +55,7 @@ pub mod metrics;
 pub mod protocol;
 pub mod records;
 pub mod table;
+pub mod versus;
 
 use std::path::{Path, PathBuf};
 
@@ -72,6 +73,7 @@ pub use layout::{AoiRule, PairFiles, Split, TruthFiles};
 pub use metrics::{score_dsm, DsmScores, Exclusions, Registration, Score, ScoreParams};
 pub use protocol::Protocol;
 pub use records::{PairRecord, RecordFile};
+pub use versus::{score_versus, CellsMae, Versus};
 
 /// Name of the per-pair CSV in the output folder.
 pub const PAIRS_CSV: &str = "pairs.csv";
