@@ -140,7 +140,7 @@ fn print_warnings(s: &ReconstructSummary, cameras: &[String; 2]) {
             r.error.as_deref().unwrap_or("no message")
         );
     }
-    if let Some(w) = s.parallax_warning([&cameras[0], &cameras[1]]) {
+    if let Some(w) = s.camera_warning([&cameras[0], &cameras[1]]) {
         eprintln!("warning: {w}");
     }
 }

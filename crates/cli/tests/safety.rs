@@ -510,3 +510,43 @@ fn a_read_only_output_folder_is_refused_before_work() {
     assert_eq!(std::fs::read_dir(&locked).unwrap().count(), 0);
     assert_unchanged(&before);
 }
+
+/// Defect 3, swapped cameras: on real pairs (DFC2019 JAX_068, bundle-adjusted RPCs) each image
+/// with its own camera runs without a camera warning; with the two cameras swapped the rectified
+/// views disagree by rows (003–004), or, where too few patches match to measure that, matching
+/// finds almost nothing (013–014): both warn naming the two cameras.
+#[test]
+fn swapped_cameras_are_warned_about() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let image = |id: &str| d.join(format!("images/JAX_068_{id}_RGB.tif"));
+    let camera = |id: &str| d.join(format!("rpcs/ba/JAX_068_{id}_RGB.json"));
+    let run = |(a, b): (&str, &str), (ca, cb): (&str, &str)| {
+        let out = dir.path().join(format!("{a}-{b}-{ca}.tif"));
+        let mut args = vec!["reconstruct".to_string()];
+        for p in [image(a), image(b)] {
+            args.push(p.to_string_lossy().into_owned());
+        }
+        for (flag, p) in [("--rpc-left", camera(ca)), ("--rpc-right", camera(cb))] {
+            args.extend([flag.to_string(), p.to_string_lossy().into_owned()]);
+        }
+        args.extend(["-o".to_string(), out.to_string_lossy().into_owned()]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = seasonstereo(&args);
+        assert_eq!(code(&o), 0, "{}", stderr(&o));
+        stderr(&o)
+    };
+    let own = run(("003", "004"), ("003", "004"));
+    assert!(!own.contains("swapped?"), "{own}");
+    let swapped = run(("003", "004"), ("004", "003"));
+    assert!(
+        swapped.contains("disagree by")
+            && swapped.contains("JAX_068_004_RGB.json belongs to the left"),
+        "{swapped}"
+    );
+    let unmatched = run(("013", "014"), ("014", "013"));
+    assert!(
+        unmatched.contains("matched along the rows") && unmatched.contains("swapped?"),
+        "{unmatched}"
+    );
+}

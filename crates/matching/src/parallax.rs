@@ -2,16 +2,25 @@
 //! textured left patches sit above or below them. With each image's own cameras it is well under
 //! a pixel (what s2p's pointing correction measures and removes); with an RPC that is not its
 //! image's (swapped, another scene's) it is many pixels, and matching along rows finds little.
-//! Measured on a few dozen patches by normalised cross-correlation, so it costs milliseconds.
+//! Measured on a few dozen patches by normalised cross-correlation at half resolution: a patch
+//! of 15 × 15 half-pixels holds enough texture to be matched unambiguously over a 2-D search of
+//! hundreds of disparities and ±24 rows (at full resolution an 11 × 11 patch found a clear match
+//! on no dev pair, and unclear ones put cross-season pairs at 10 px). On the JAX_068 dev pairs
+//! (BA cameras) the pairs with their own cameras measure 0 px, swapped cameras 4–22 px where
+//! enough patches match; so it costs milliseconds and only speaks with evidence.
 
 use raster::Image;
 
-/// Half the side of a compared patch (11 × 11 pixels).
-const HALF: usize = 5;
-/// Rows searched above and below each left patch.
+/// The images are compared at 1/`SCALE` of their resolution.
+const SCALE: usize = 2;
+/// Half the side of a compared patch (15 × 15 pixels at 1/`SCALE`).
+const HALF: usize = 7;
+/// Rows searched above and below each left patch, full-resolution pixels.
 pub const MAX_ROWS: usize = 24;
+/// Rows searched at 1/`SCALE`.
+const COARSE_ROWS: usize = MAX_ROWS / SCALE;
 /// Candidate patches per side of the sampling grid.
-const GRID: usize = 8;
+const GRID: usize = 12;
 /// When a patch's best match counts: its correlation reaches `ncc` and beats every row more
 /// than `peak_rows` away by `margin`.
 struct Acceptance {
@@ -26,12 +35,13 @@ const ACCEPT: Acceptance = Acceptance {
     peak_rows: 2,
 };
 /// Too few matched patches measure nothing.
-const MIN_POINTS: usize = 8;
+const MIN_POINTS: usize = 3;
 
 /// The measure of one rectified pair.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Parallax {
-    /// Median absolute row offset of the matched patches, pixels.
+    /// Median absolute row offset of the matched patches, full-resolution pixels (a multiple of
+    /// 2: the search is at half resolution).
     pub median_rows: f32,
     /// Patches matched (correlation ≥ 0.8, inside the row search) of those tried.
     pub matched: usize,
@@ -43,10 +53,14 @@ pub struct Parallax {
 /// `x_R = x_L − d`, `d` in `range` (inclusive); `None` when too few textured patches match to
 /// tell (featureless, or the rows are off by more than [`MAX_ROWS`]).
 pub fn vertical_parallax(left: &Image, right: &Image, range: (i32, i32)) -> Option<Parallax> {
-    let (l, r) = (left.to_gray(), right.to_gray());
+    let (l, r) = (reduced(&left.to_gray()), reduced(&right.to_gray()));
+    let range = (
+        range.0.div_euclid(SCALE as i32),
+        -(-range.1).div_euclid(SCALE as i32),
+    );
     let (lw, lh) = l.size();
     let (rw, rh) = r.size();
-    let margin = HALF + MAX_ROWS;
+    let margin = HALF + COARSE_ROWS;
     if lw <= 2 * margin || lh <= 2 * margin || rh <= 2 * margin {
         return None;
     }
@@ -54,7 +68,7 @@ pub fn vertical_parallax(left: &Image, right: &Image, range: (i32, i32)) -> Opti
     let mut offsets: Vec<f32> = patches
         .iter()
         .filter_map(|&(x, y)| best_row_offset(&l, &r, (x, y), range, (rw, rh)))
-        .map(|dy| dy.unsigned_abs() as f32)
+        .map(|dy| (dy.unsigned_abs() as usize * SCALE) as f32)
         .collect();
     if offsets.len() < MIN_POINTS {
         return None;
@@ -64,6 +78,19 @@ pub fn vertical_parallax(left: &Image, right: &Image, range: (i32, i32)) -> Opti
         median_rows: offsets[offsets.len() / 2],
         matched: offsets.len(),
         tried: patches.len(),
+    })
+}
+
+/// `grey` at 1/[`SCALE`] of its size, each pixel the mean of a block (NaN if one of its pixels is).
+fn reduced(grey: &Image) -> Image {
+    let (w, h) = grey.size();
+    let n = (SCALE * SCALE) as f32;
+    Image::from_fn(w / SCALE, h / SCALE, |x, y| {
+        let block = (0..SCALE).flat_map(|dy| (0..SCALE).map(move |dx| (dx, dy)));
+        block
+            .map(|(dx, dy)| grey.get(x * SCALE + dx, y * SCALE + dy, 0))
+            .sum::<f32>()
+            / n
     })
 }
 
@@ -110,7 +137,7 @@ fn patch(grey: &Image, x: usize, y: usize) -> impl Iterator<Item = f32> + '_ {
 }
 
 /// The row offset of the right patch that best correlates with the left one at `(x, y)`, over
-/// the disparity range and ±[`MAX_ROWS`]; `None` when the best is weak, on the search's edge, or
+/// the disparity range and ±[`COARSE_ROWS`]; `None` when the best is weak, on the search's edge, or
 /// not clearly above the best of the rows further away ([`ACCEPT`]) (a repeated or changed
 /// texture: cross-season pairs have many of those).
 fn best_row_offset(
@@ -122,7 +149,7 @@ fn best_row_offset(
 ) -> Option<i32> {
     let (lm, ls) = patch_stats(l, x, y)?;
     let left: Vec<f32> = patch(l, x, y).map(|v| (v - lm) / ls).collect();
-    let rows = -(MAX_ROWS as i32)..=MAX_ROWS as i32;
+    let rows = -(COARSE_ROWS as i32)..=COARSE_ROWS as i32;
     // The best correlation of each row offset over the disparities.
     let by_row: Vec<f32> = rows
         .clone()
@@ -161,9 +188,9 @@ fn best_row_offset(
         .filter(|(i, _)| i.abs_diff(k) > ACCEPT.peak_rows)
         .map(|(_, &v)| v)
         .fold(f32::NEG_INFINITY, f32::max);
-    let dy = k as i32 - MAX_ROWS as i32;
+    let dy = k as i32 - COARSE_ROWS as i32;
     let clear = best >= ACCEPT.ncc && best - elsewhere >= ACCEPT.margin;
-    (clear && dy.unsigned_abs() < MAX_ROWS as u32).then_some(dy)
+    (clear && dy.unsigned_abs() < COARSE_ROWS as u32).then_some(dy)
 }
 
 #[cfg(test)]
@@ -193,10 +220,10 @@ mod tests {
     #[test]
     fn measures_the_rows_between_the_views() {
         let left = texture(200, 160, (50, 50));
-        // The right view: its pixel (x − 7, y − dy) shows the left's (x, y): disparity 7, and
+        // The right view: its pixel (x − 8, y − dy) shows the left's (x, y): disparity 8, and
         // the matches `dy` rows off.
-        for dy in [0i32, 3, -6, 15] {
-            let right = texture(200, 160, (57, (50 + dy) as usize));
+        for dy in [0i32, 4, -6, 16] {
+            let right = texture(200, 160, (58, (50 + dy) as usize));
             let p = vertical_parallax(&left, &right, (0, 10)).expect("textured");
             assert_eq!(p.median_rows, dy.unsigned_abs() as f32, "{p:?}");
             assert!(p.matched >= MIN_POINTS, "{p:?}");
