@@ -11,7 +11,7 @@ use crate::{CameraError, Points, Result, UtmZone};
 
 /// A north-up UTM grid of square cells: cell (col, row) covers eastings
 /// [x0 + col·res, x0 + (col+1)·res) and northings (y0 − (row+1)·res, y0 − row·res].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct DsmGrid {
     /// Easting of the west edge, metres.
     pub x0: f64,

@@ -10,6 +10,7 @@ use clap::{Args, ValueEnum};
 use dataset::Shard;
 use matching::{Paths, SgmParams};
 use nn::device::DeviceChoice;
+use pipeline::dsm::GridChoice;
 use pipeline::matcher::{Matcher, MonsterOptions};
 use pipeline::stage::BatchSummary;
 
@@ -348,5 +349,61 @@ pub fn parse_box(s: &str, names: &str) -> Result<[f64; 4], String> {
         [a, b, c, d] if a < c && b < d => Ok([a, b, c, d]),
         [_, _, _, _] => Err(format!("{names} {s:?} must have each MIN < MAX")),
         _ => Err(format!("expected {names}, got {s:?}")),
+    }
+}
+
+/// How a pair is cut into tiles and how many run at once.
+#[derive(Args)]
+pub struct TilingArgs {
+    /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
+    /// (an affine rectification holds only over a small area) and the tiles are merged.
+    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    pub tile: usize,
+    /// Overlap collar around each tile, pixels: context for the matcher; only the points of
+    /// each tile's core are kept, so the collar never shows as a seam.
+    #[arg(long, value_name = "PX", default_value_t = 64)]
+    pub collar: usize,
+    /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
+    /// and only as many tiles as fit run at once (at most one per core).
+    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
+    pub max_memory: f64,
+}
+
+impl TilingArgs {
+    /// The memory budget in bytes.
+    pub fn max_memory_bytes(&self) -> Result<u64> {
+        let gib = self.max_memory;
+        if !(gib.is_finite() && gib > 0.0) {
+            bail!("--max-memory must be a positive number of GiB, got {gib}");
+        }
+        Ok((gib * (1u64 << 30) as f64) as u64)
+    }
+}
+
+/// The DSM's grid: a reference DSM's, or a UTM grid of a resolution over the scene.
+#[derive(Args)]
+pub struct GridArgs {
+    /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
+    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
+    pub like: Option<PathBuf>,
+    /// Cell size in metres (without --like; the grid covers the scene).
+    #[arg(long, default_value_t = 0.5)]
+    pub resolution: f64,
+    /// EPSG code of the UTM zone (without --like; default: the scene's zone).
+    #[arg(long)]
+    pub epsg: Option<u32>,
+}
+
+impl GridArgs {
+    /// The library's grid choice.
+    pub fn choice(&self) -> GridChoice {
+        match &self.like {
+            Some(p) => GridChoice::Like(p.clone()),
+            None => GridChoice::Resolution {
+                resolution: self.resolution,
+                bounds: None,
+                epsg: self.epsg,
+            },
+        }
     }
 }

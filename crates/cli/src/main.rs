@@ -7,6 +7,7 @@
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+mod allocator;
 mod args;
 mod bars;
 mod bench;
@@ -114,18 +115,8 @@ enum Command {
     Train(train::TrainArgs),
 }
 
-/// `mi_option_purge_delay` of mimalloc's `mi_option_e` (`mimalloc.h`).
-pub(crate) const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
-
-/// Freed pages are never handed back to the kernel (`-1`). mimalloc's default returns the pages
-/// of a network's tensors between two layers and faults them in again, zeroed, for the next
-/// (32,000 page faults and a tenth of a MonSter++ pass, BENCHMARKS.md); a stage's memory then
-/// stays at its peak until the process ends, which is the figure a memory budget plans for.
-const PURGE_DELAY_MS: std::ffi::c_long = -1;
-
 fn main() -> ExitCode {
-    // SAFETY: sets a plain integer option of the allocator, before any thread is started.
-    unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, PURGE_DELAY_MS) };
+    allocator::keep_freed_pages();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => return exit::parse_error(e),

@@ -5,11 +5,12 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use clap::Args;
 use seasonstereo::{
-    reconstruct, DsmSummary, GridChoice, Progress, ReconstructOptions, ReconstructSummary,
-    TileStatus,
+    reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, TileStatus,
 };
 
-use crate::args::{parse_alt_range, parse_box, parse_roi, GriddingArg, MatcherArgs, ShardArg};
+use crate::args::{
+    parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs, ShardArg, TilingArgs,
+};
 
 #[derive(Args)]
 #[command(
@@ -45,18 +46,8 @@ pub struct ReconstructArgs {
     /// any altitude of the scene.
     #[arg(long, value_name = "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX", value_parser = parse_lonlat, allow_hyphen_values = true)]
     roi_lonlat: Option<[f64; 4]>,
-    /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
-    /// (an affine rectification holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = 1024)]
-    tile: usize,
-    /// Overlap collar around each tile, pixels: context for the matcher; only the points of
-    /// each tile's core are kept, so the collar never shows as a seam.
-    #[arg(long, value_name = "PX", default_value_t = 64)]
-    collar: usize,
-    /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
-    /// and only as many tiles as fit run at once (at most one per core).
-    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
-    max_memory: f64,
+    #[command(flatten)]
+    tiling: TilingArgs,
     /// The tiles of the plan, all shards sharing one --work folder; the shard that finds every
     /// tile finished writes the DSM (or run --merge at the end).
     #[command(flatten)]
@@ -77,15 +68,8 @@ pub struct ReconstructArgs {
     /// Folder of the intermediate files (default: OUTPUT without extension + "_work").
     #[arg(long, value_name = "DIR")]
     work: Option<PathBuf>,
-    /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
-    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
-    like: Option<PathBuf>,
-    /// Cell size in metres (without --like; the grid covers the points).
-    #[arg(long, default_value_t = 0.5)]
-    resolution: f64,
-    /// EPSG code of the UTM zone (without --like; default: the zone of the points).
-    #[arg(long)]
-    epsg: Option<u32>,
+    #[command(flatten)]
+    grid: GridArgs,
     /// Height of a cell from its points. Default median: robust, the DSM to use. `max` is the
     /// benchmark's protocol (what `seasonstereo eval` does).
     #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
@@ -109,7 +93,7 @@ pub struct ReconstructArgs {
 }
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
-    let (tile, collar, output) = (a.tile, a.collar, a.output.clone());
+    let (tile, collar, output) = (a.tiling.tile, a.tiling.collar, a.output.clone());
     let cameras = a.camera_names();
     a.guard_output()?;
     let s = reconstruct(&a.options()?, progress)?;
@@ -168,17 +152,10 @@ impl ReconstructArgs {
     /// The library's options for these flags.
     fn options(self) -> Result<ReconstructOptions> {
         self.check_truth()?;
-        let grid = match &self.like {
-            Some(p) => GridChoice::Like(p.clone()),
-            None => GridChoice::Resolution {
-                resolution: self.resolution,
-                bounds: None,
-                epsg: self.epsg,
-            },
-        };
+        let grid = self.grid.choice();
         Ok(ReconstructOptions {
             matcher: self.matcher.matcher()?,
-            max_memory: gib_to_bytes(self.max_memory)?,
+            max_memory: self.tiling.max_memory_bytes()?,
             left: self.left,
             right: self.right,
             rpc_left: self.rpc_left,
@@ -194,8 +171,8 @@ impl ReconstructArgs {
             median_filter: (self.median_filter > 1).then_some(self.median_filter),
             border: 0,
             truth: self.truth,
-            tile: self.tile,
-            collar: self.collar,
+            tile: self.tiling.tile,
+            collar: self.tiling.collar,
             shard: self.shard.shard,
             merge_only: self.merge,
             keep_intermediates: self.keep_intermediates,
@@ -214,7 +191,7 @@ impl ReconstructArgs {
             Some(&self.right),
             self.rpc_left.as_ref(),
             self.rpc_right.as_ref(),
-            self.like.as_ref(),
+            self.grid.like.as_ref(),
             self.truth.as_ref(),
         ];
         let inputs: Vec<&std::path::Path> =
@@ -236,7 +213,7 @@ impl ReconstructArgs {
 
     /// The scores need the truth's grid: `--truth` must be the `--like` DSM.
     fn check_truth(&self) -> Result<()> {
-        if let (Some(t), Some(l)) = (&self.truth, &self.like) {
+        if let (Some(t), Some(l)) = (&self.truth, &self.grid.like) {
             if t != l {
                 bail!(
                     "--truth {} must be the DSM given to --like (the scores need its grid)",
@@ -288,14 +265,6 @@ fn dsm_line(s: &ReconstructSummary, dsm: &DsmSummary, output: &std::path::Path) 
         s.stem,
         times.join(", ")
     )
-}
-
-/// A positive number of GiB in bytes.
-pub(crate) fn gib_to_bytes(gib: f64) -> Result<u64> {
-    if !(gib.is_finite() && gib > 0.0) {
-        bail!("--max-memory must be a positive number of GiB, got {gib}");
-    }
-    Ok((gib * (1u64 << 30) as f64) as u64)
 }
 
 /// `LON_MIN,LAT_MIN,LON_MAX,LAT_MAX`.

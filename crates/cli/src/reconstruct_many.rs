@@ -7,11 +7,11 @@ use anyhow::Result;
 use clap::Args;
 use pipeline::outputs::Incomplete;
 use seasonstereo::{
-    reconstruct_many, FusionParams, GridChoice, PairChoice, PairStatus, Progress,
-    ReconstructManyOptions, ReconstructManySummary, View,
+    reconstruct_many, FusionParams, PairChoice, PairStatus, Progress, ReconstructManyOptions,
+    ReconstructManySummary, View,
 };
 
-use crate::args::{parse_alt_range, GriddingArg, MatcherArgs};
+use crate::args::{parse_alt_range, GridArgs, GriddingArg, MatcherArgs, TilingArgs};
 
 #[derive(Args)]
 #[command(
@@ -74,15 +74,8 @@ pub struct ReconstructManyArgs {
     /// Folder of the pairs' DSMs and tiles (default: OUTPUT without extension + "_work").
     #[arg(long, value_name = "DIR")]
     work: Option<PathBuf>,
-    /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
-    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
-    like: Option<PathBuf>,
-    /// Cell size in metres (without --like).
-    #[arg(long, default_value_t = 0.5)]
-    resolution: f64,
-    /// EPSG code of the UTM zone (without --like; default: the first camera's zone).
-    #[arg(long)]
-    epsg: Option<u32>,
+    #[command(flatten)]
+    grid: GridArgs,
     /// Score the fused DSM and every pair's against this truth <AOI>_DSM.tif; needs --like on
     /// the same file.
     #[arg(long, value_name = "DSM", requires = "like")]
@@ -94,15 +87,9 @@ pub struct ReconstructManyArgs {
     /// Height of a cell of a pair's DSM from its points.
     #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
     gridding: GriddingArg,
-    /// Tile side of each pair, left raw pixels.
-    #[arg(long, value_name = "PX", default_value_t = 1024)]
-    tile: usize,
-    /// Overlap collar around each tile, pixels.
-    #[arg(long, value_name = "PX", default_value_t = 64)]
-    collar: usize,
-    /// Memory budget of the process, GiB (each pair's tiles, then the fusion by row blocks).
-    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
-    max_memory: f64,
+    /// Each pair's tiles; the fusion runs by row blocks within the same memory budget.
+    #[command(flatten)]
+    tiling: TilingArgs,
     #[command(flatten)]
     matcher: MatcherArgs,
 }
@@ -111,10 +98,9 @@ pub struct ReconstructManyArgs {
 /// a DSM (exit 3).
 pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     // Pairs of different sizes run one after the other: freed pages go back to the kernel after
-    // 10 ms (mimalloc's default) instead of never (main.rs), or the process would hold every
+    // 10 ms (mimalloc's default) instead of never (allocator.rs), or the process would hold every
     // pair's peak at once and overshoot --max-memory (2.25 GB for 12 dev pairs at 2 GiB).
-    // SAFETY: sets a plain integer option of the allocator.
-    unsafe { libmimalloc_sys::mi_option_set(crate::MI_OPTION_PURGE_DELAY, 10) };
+    crate::allocator::return_freed_pages_after(10);
     let s = reconstruct_many(&a.options()?, progress)?;
     print_pairs(&s.chosen, &s.views, s.candidates);
     if s.pairs.is_empty() {
@@ -173,14 +159,7 @@ fn warn_incomplete(s: &ReconstructManySummary) -> Vec<String> {
 impl ReconstructManyArgs {
     /// The library's options for these flags.
     fn options(self) -> Result<ReconstructManyOptions> {
-        let grid = match &self.like {
-            Some(p) => GridChoice::Like(p.clone()),
-            None => GridChoice::Resolution {
-                resolution: self.resolution,
-                bounds: None,
-                epsg: self.epsg,
-            },
-        };
+        let grid = self.grid.choice();
         let mut o = ReconstructManyOptions::new(
             self.images,
             self.rpc_dir,
@@ -201,8 +180,8 @@ impl ReconstructManyArgs {
         o.truth = self.truth;
         o.alt_range = self.alt_range;
         o.gridding = self.gridding.into();
-        (o.tile, o.collar) = (self.tile, self.collar);
-        o.max_memory = crate::reconstruct::gib_to_bytes(self.max_memory)?;
+        (o.tile, o.collar) = (self.tiling.tile, self.tiling.collar);
+        o.max_memory = self.tiling.max_memory_bytes()?;
         o.overwrite = crate::exit::overwrite();
         Ok(o)
     }

@@ -192,35 +192,11 @@ pub struct FusedOutcome {
     pub spread: PathBuf,
     /// Pairs fused.
     pub pairs: usize,
-    pub grid: GridRecord,
+    pub grid: DsmGrid,
     /// Cells with a fused height, cells with a height after filling.
     pub measured_cells: usize,
     pub filled_cells: usize,
     pub seconds: f64,
-}
-
-/// A DSM grid as recorded.
-#[derive(Clone, Debug, Serialize)]
-pub struct GridRecord {
-    pub x0: f64,
-    pub y0: f64,
-    pub resolution: f64,
-    pub width: usize,
-    pub height: usize,
-    pub epsg: u32,
-}
-
-impl From<&DsmGrid> for GridRecord {
-    fn from(g: &DsmGrid) -> Self {
-        GridRecord {
-            x0: g.x0,
-            y0: g.y0,
-            resolution: g.resolution,
-            width: g.width,
-            height: g.height,
-            epsg: g.epsg,
-        }
-    }
 }
 
 /// What [`reconstruct_many`] did (also written as the report).
@@ -545,7 +521,7 @@ fn write_fused(
         count: count_path,
         spread: spread_path,
         pairs,
-        grid: grid.into(),
+        grid: grid.clone(),
         measured_cells,
         filled_cells: dsm.data().iter().filter(|v| v.is_finite()).count(),
         seconds: t.elapsed().as_secs_f64(),

@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use camera::{RpcModel, UtmZone};
+use chrono::{NaiveDate, NaiveTime};
 use serde::Serialize;
 
 /// Days of date gap at which the date term is one half.
@@ -138,27 +139,12 @@ pub fn parse_day(text: &str) -> Option<f64> {
     if t.len() < 8 || !t.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    let num = |a: usize, b: usize| t.get(a..b).and_then(|s| s.parse::<i64>().ok());
-    let (y, m, d) = (num(0, 4)?, num(4, 6)?, num(6, 8)?);
-    if !(1..=12).contains(&m) || !(1..=31).contains(&d) {
-        return None;
-    }
-    let seconds = match (num(8, 10), num(10, 12), num(12, 14)) {
-        (Some(h), Some(mi), Some(s)) => h * 3600 + mi * 60 + s,
-        _ => 0,
-    };
-    Some(days_from_civil(y, m, d) as f64 + seconds as f64 / 86400.0)
-}
-
-/// Days from 1970-01-01 to the proleptic Gregorian date (Howard Hinnant's algorithm).
-fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (m + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146097 + doe - 719468
+    let date = NaiveDate::parse_from_str(t.get(..8)?, "%Y%m%d").ok()?;
+    let time = t
+        .get(8..14)
+        .and_then(|hms| NaiveTime::parse_from_str(hms, "%H%M%S").ok())
+        .unwrap_or(NaiveTime::MIN);
+    Some(date.and_time(time).and_utc().timestamp() as f64 / 86_400.0)
 }
 
 /// What a SatNeRF JSON camera says of its acquisition besides the RPC.
