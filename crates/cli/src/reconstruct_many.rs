@@ -118,11 +118,7 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     };
     println!("{}", fused_line(&s, f));
     if let Some(sc) = &s.scores {
-        println!(
-            "vs truth: {}{}",
-            crate::score::format_scores(sc),
-            within(s.within_1m)
-        );
+        println!("vs truth: {}", crate::score::format_scores(sc));
     }
     if let Some(r) = &s.report {
         println!("report: {}", r.display());
@@ -226,11 +222,7 @@ fn print_pairs(chosen: &[PairChoice], views: &[View], candidates: usize) {
 /// One pair's line: status, measured share, scores.
 fn pair_line(p: &seasonstereo::PairOutcome) -> String {
     let scores = p.scores.as_ref().map_or(String::new(), |s| {
-        format!(
-            ", vs truth: {}{}",
-            crate::score::format_scores(s),
-            within(p.within_1m)
-        )
+        format!(", vs truth: {}", crate::score::format_scores(s))
     });
     let status = status_word(p.status);
     format!(
@@ -272,11 +264,5 @@ fn fused_line(s: &ReconstructManySummary, f: &seasonstereo::FusedOutcome) -> Str
 fn name(p: &Path) -> String {
     p.file_name().map_or(p.display().to_string(), |n| {
         n.to_string_lossy().into_owned()
-    })
-}
-
-fn within(w: Option<f64>) -> String {
-    w.map_or(String::new(), |w| {
-        format!(", within 1 m {:.1} %", 100.0 * w)
     })
 }

@@ -41,7 +41,7 @@ use super::select::{
 use super::tile::TileStatus;
 use super::{footprint, reconstruct, score_against_truth, ReconstructOptions};
 use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
-use crate::eval::align::{align, apply, AlignParams};
+use crate::eval::align::{align, AlignParams};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
 use crate::outputs::{check_output_file, check_output_folder};
@@ -178,7 +178,6 @@ pub struct PairOutcome {
     pub measured_share: f64,
     /// Scores of the pair's (unfilled) DSM against the truth.
     pub scores: Option<DsmScores>,
-    pub within_1m: Option<f64>,
     /// How the pair's DSM was moved onto the reference pair's before fusion.
     pub registration: Option<Shift>,
     pub seconds: f64,
@@ -211,9 +210,6 @@ pub struct ReconstructManySummary {
     pub fusion: Option<FusionParams>,
     pub fused: Option<FusedOutcome>,
     pub scores: Option<DsmScores>,
-    /// Share of the truth's unmasked cells (foliage and water out) whose registered height is
-    /// within 1 m (a missing cell is a miss).
-    pub within_1m: Option<f64>,
     pub work: PathBuf,
     pub report: Option<PathBuf>,
     pub seconds: f64,
@@ -242,19 +238,8 @@ pub fn reconstruct_many(
         return Ok(summary);
     }
     let rows = fusion_rows(&grids.fused, summary.chosen.len(), opts.max_memory)?;
-    let truth = match &opts.truth {
-        Some(t) => Some(crate::score::read_truth(t, grids.fused.zone())?),
-        None => None,
-    };
-    run_pairs(opts, &mut summary, &grids, truth.as_ref(), progress);
-    fuse_pairs(
-        opts,
-        &mut summary,
-        &grids.fused,
-        rows,
-        truth.as_ref(),
-        progress,
-    )?;
+    run_pairs(opts, &mut summary, &grids, progress);
+    fuse_pairs(opts, &mut summary, &grids.fused, rows, progress)?;
     summary.seconds = start.elapsed().as_secs_f64();
     if summary.fused.is_some() {
         let report = opts.sibling("_report.json");
@@ -291,7 +276,6 @@ fn plan(opts: &ReconstructManyOptions) -> Result<(ReconstructManySummary, Grids)
         fusion: None,
         fused: None,
         scores: None,
-        within_1m: None,
         work,
         report: None,
         seconds: 0.0,
@@ -305,7 +289,6 @@ fn run_pairs(
     opts: &ReconstructManyOptions,
     summary: &mut ReconstructManySummary,
     grids: &Grids,
-    truth: Option<&crate::eval::Truth>,
     progress: &dyn Progress,
 ) {
     for (k, pair) in summary.chosen.iter().enumerate() {
@@ -316,11 +299,9 @@ fn run_pairs(
             steps: std::sync::atomic::AtomicUsize::new(1),
         };
         let pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
-        let mut outcome = run_pair(&pair_opts, &grids.fused, &pair.stem, &shown);
-        if let (Some(t), Some(s)) = (truth, &outcome.scores) {
-            outcome.within_1m = within_1m(&outcome.dsm, t, s).ok().flatten();
-        }
-        summary.pairs.push(outcome);
+        summary
+            .pairs
+            .push(run_pair(&pair_opts, &grids.fused, &pair.stem, &shown));
     }
 }
 
@@ -331,7 +312,6 @@ fn fuse_pairs(
     summary: &mut ReconstructManySummary,
     grid: &DsmGrid,
     rows: usize,
-    truth: Option<&crate::eval::Truth>,
     progress: &dyn Progress,
 ) -> Result<()> {
     let t = Instant::now();
@@ -362,10 +342,8 @@ fn fuse_pairs(
     summary.fusion = Some(params);
     let fused = fuse_files(&layers, grid, rows, &params, progress)?;
     summary.fused = Some(write_fused(opts, fused, grid, layers.len(), t)?);
-    if let (Some(path), Some(truth)) = (&opts.truth, truth) {
-        let scores = score_against_truth(&opts.output, path, grid)?;
-        summary.within_1m = within_1m(&opts.output, truth, &scores)?;
-        summary.scores = Some(scores);
+    if let Some(path) = &opts.truth {
+        summary.scores = Some(score_against_truth(&opts.output, path, grid)?);
     }
     Ok(())
 }
@@ -459,7 +437,6 @@ fn run_pair(
         measured_cells: 0,
         measured_share: 0.0,
         scores: None,
-        within_1m: None,
         registration: None,
         seconds: 0.0,
     };
@@ -555,26 +532,6 @@ fn co_register(reference: &Path, path: &Path, grid: &DsmGrid) -> Result<Shift> {
             offset: al.offset as f32,
         }),
     )
-}
-
-/// Share of the truth's unmasked cells whose height, after the filtered score's registration,
-/// is within 1 m of the truth (a missing cell counts as a miss); `None` without registration.
-fn within_1m(dsm: &Path, truth: &crate::eval::Truth, s: &DsmScores) -> Result<Option<f64>> {
-    let Some(offset) = s.offset else {
-        return Ok(None);
-    };
-    let pred = camera::read_dsm(dsm, Some(truth.grid.zone()))?.image;
-    let aligned = apply(&pred, s.dx, s.dy, offset);
-    let ex = &truth.exclusions;
-    let (mut cells, mut hits) = (0usize, 0usize);
-    for (i, (&g, &p)) in truth.dsm.data().iter().zip(aligned.data()).enumerate() {
-        if !g.is_finite() || ex.water.data()[i] || ex.foliage.data()[i] {
-            continue;
-        }
-        cells += 1;
-        hits += ((g - p).abs() <= 1.0) as usize;
-    }
-    Ok((cells > 0).then(|| hits as f64 / cells as f64))
 }
 
 /// The UTM zone of the scene: the grid's when given, else the first camera's.
