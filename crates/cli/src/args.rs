@@ -8,8 +8,9 @@ use camera::rectify::Roi;
 use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
 use dataset::Shard;
-use matching::{Paths, SgmParams};
+use matching::SgmParams;
 use nn::device::DeviceChoice;
+use pipeline::flags::{census_window, format_census, ClassicalFlags};
 use pipeline::matcher::{Matcher, MonsterOptions};
 use pipeline::stage::BatchSummary;
 
@@ -189,61 +190,26 @@ pub struct SgmArgs {
     speckle_diff: f32,
 }
 
-fn format_census(c: matching::CensusWindow) -> String {
-    format!("{}x{}", c.width, c.height)
-}
-
 fn parse_census(s: &str) -> Result<String, String> {
     census_window(s).map(|_| s.to_string())
-}
-
-fn census_window(s: &str) -> Result<matching::CensusWindow, String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected WxH, e.g. 9x7, got {s:?}"))?;
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<usize>()
-            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
-    };
-    let c = matching::CensusWindow {
-        width: parse(w)?,
-        height: parse(h)?,
-    };
-    if !c.is_valid() {
-        return Err(format!(
-            "census window {s:?} needs odd sides and at most 65 pixels"
-        ));
-    }
-    Ok(c)
 }
 
 impl SgmArgs {
     /// The classical matcher's parameters with `aggregation`.
     pub fn params(&self, aggregation: matching::Aggregation) -> Result<SgmParams> {
-        let params = SgmParams {
+        ClassicalFlags {
+            method: aggregation,
             p1: self.p1,
             p2: self.p2,
-            aggregation,
-            paths: if self.four_paths {
-                Paths::Four
-            } else {
-                Paths::Eight
-            },
-            lr_tolerance: (self.lr_tolerance > 0.0).then_some(self.lr_tolerance),
-            p2_adaptive: (self.p2_adaptive > 0.0).then_some(self.p2_adaptive),
+            four_paths: self.four_paths,
+            lr_tolerance: self.lr_tolerance,
+            p2_adaptive: self.p2_adaptive,
             census: census_window(&self.census).map_err(anyhow::Error::msg)?,
-            uniqueness: (self.uniqueness > 0.0).then_some(self.uniqueness),
-            speckle: (self.speckle > 1).then_some(matching::Speckle {
-                min_area: self.speckle,
-                max_diff: self.speckle_diff,
-            }),
-            ..SgmParams::default()
-        };
-        params
-            .check()
-            .context("the classical matcher's flags (--p1, --p2, --census, --lr-tolerance, ...)")?;
-        Ok(params)
+            uniqueness: self.uniqueness,
+            speckle: self.speckle,
+            speckle_diff: self.speckle_diff,
+        }
+        .params()
     }
 }
 

@@ -2,12 +2,14 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use seasonstereo::{
-    reconstruct, DsmSummary, GridChoice, Progress, ReconstructOptions, ReconstructSummary,
-    TileStatus,
+    reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, TileStatus,
 };
+
+use pipeline::flags;
+use pipeline::reconstruct::options;
 
 use crate::args::{parse_alt_range, parse_box, parse_roi, GriddingArg, MatcherArgs, ShardArg};
 
@@ -47,15 +49,15 @@ pub struct ReconstructArgs {
     roi_lonlat: Option<[f64; 4]>,
     /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
     /// (an affine rectification holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    #[arg(long, value_name = "PX", default_value_t = options::DEFAULT_TILE)]
     tile: usize,
     /// Overlap collar around each tile, pixels: context for the matcher; only the points of
     /// each tile's core are kept, so the collar never shows as a seam.
-    #[arg(long, value_name = "PX", default_value_t = 64)]
+    #[arg(long, value_name = "PX", default_value_t = options::DEFAULT_COLLAR)]
     collar: usize,
     /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
     /// and only as many tiles as fit run at once (at most one per core).
-    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
+    #[arg(long, value_name = "GIB", default_value_t = options::DEFAULT_MEMORY_GIB)]
     max_memory: f64,
     /// The tiles of the plan, all shards sharing one --work folder; the shard that finds every
     /// tile finished writes the DSM (or run --merge at the end).
@@ -81,7 +83,7 @@ pub struct ReconstructArgs {
     #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
     like: Option<PathBuf>,
     /// Cell size in metres (without --like; the grid covers the points).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = flags::RESOLUTION)]
     resolution: f64,
     /// EPSG code of the UTM zone (without --like; default: the zone of the points).
     #[arg(long)]
@@ -93,12 +95,12 @@ pub struct ReconstructArgs {
     /// Fill the DSM's holes enclosed by data within this many cells, ground first (the ground
     /// hidden behind buildings, unmatched patches); 0 leaves them empty, as the benchmark's
     /// protocol does.
-    #[arg(long, value_name = "CELLS", default_value_t = 40)]
+    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_CELLS)]
     fill_holes: usize,
     /// Median filter of the DSM over this odd window of cells, after the filling: removes the
     /// roughness of single-pair matching on roofs and ground and keeps building edges (7 cells =
     /// 3.5 m at 0.5 m); 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = 7)]
+    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_MEDIAN_CELLS)]
     median_filter: usize,
     /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)
     /// with the benchmark's metric; needs --like on the same file.
@@ -167,18 +169,9 @@ fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
 impl ReconstructArgs {
     /// The library's options for these flags.
     fn options(self) -> Result<ReconstructOptions> {
-        self.check_truth()?;
-        let grid = match &self.like {
-            Some(p) => GridChoice::Like(p.clone()),
-            None => GridChoice::Resolution {
-                resolution: self.resolution,
-                bounds: None,
-                epsg: self.epsg,
-            },
-        };
         Ok(ReconstructOptions {
             matcher: self.matcher.matcher()?,
-            max_memory: gib_to_bytes(self.max_memory)?,
+            max_memory: flags::memory_bytes(self.max_memory)?,
             left: self.left,
             right: self.right,
             rpc_left: self.rpc_left,
@@ -188,10 +181,10 @@ impl ReconstructArgs {
             alt_range: self.alt_range,
             output: self.output,
             work_dir: self.work,
-            grid,
+            grid: flags::grid(self.like, self.resolution, None, self.epsg),
             gridding: self.gridding.into(),
-            fill_holes: (self.fill_holes > 0).then_some(self.fill_holes),
-            median_filter: (self.median_filter > 1).then_some(self.median_filter),
+            fill_holes: flags::fill_cells(self.fill_holes),
+            median_filter: flags::median_cells(self.median_filter),
             border: 0,
             truth: self.truth,
             tile: self.tile,
@@ -232,19 +225,6 @@ impl ReconstructArgs {
             name(&self.rpc_left, &self.left),
             name(&self.rpc_right, &self.right),
         ]
-    }
-
-    /// The scores need the truth's grid: `--truth` must be the `--like` DSM.
-    fn check_truth(&self) -> Result<()> {
-        if let (Some(t), Some(l)) = (&self.truth, &self.like) {
-            if t != l {
-                bail!(
-                    "--truth {} must be the DSM given to --like (the scores need its grid)",
-                    t.display()
-                );
-            }
-        }
-        Ok(())
     }
 }
 
@@ -288,14 +268,6 @@ fn dsm_line(s: &ReconstructSummary, dsm: &DsmSummary, output: &std::path::Path) 
         s.stem,
         times.join(", ")
     )
-}
-
-/// A positive number of GiB in bytes.
-fn gib_to_bytes(gib: f64) -> Result<u64> {
-    if !(gib.is_finite() && gib > 0.0) {
-        bail!("--max-memory must be a positive number of GiB, got {gib}");
-    }
-    Ok((gib * (1u64 << 30) as f64) as u64)
 }
 
 /// `LON_MIN,LAT_MIN,LON_MAX,LAT_MAX`.

@@ -151,6 +151,7 @@ pub fn reconstruct(
     opts: &ReconstructOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
+    opts.check_truth()?;
     check_tile_side(opts.tile)?;
     let work = opts
         .work_dir

@@ -46,7 +46,9 @@
 use std::path::Path;
 
 pub use anyhow::{Error, Result};
-pub use camera::{DsmGrid, Gridding, RpcModel, UtmZone};
+pub use camera::rectify::Roi;
+pub use camera::{read_dsm, DsmGrid, DsmRaster, Gridding, RpcModel, UtmZone};
+pub use dataset::Shard;
 pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
 pub use pipeline::eval::metrics::DsmScores;
@@ -57,7 +59,8 @@ pub use pipeline::matcher::{Matched, Matcher, RangeSource};
 pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};
 pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary};
 pub use pipeline::rectify::{RectifyOptions, RectifySummary};
-pub use pipeline::{Progress, Silent};
+pub use pipeline::score::truth_zone;
+pub use pipeline::{flags, Progress, Silent};
 pub use raster::Image;
 
 pub mod stages;
@@ -127,4 +130,30 @@ pub fn score(dsm: &Path, truth: &Truth) -> Result<DsmScores> {
 /// the paper's Table 1.
 pub fn eval(options: &EvalOptions, progress: &dyn Progress) -> Result<EvalReport> {
     pipeline::eval::evaluate(options, progress)
+}
+
+/// An error as one line, each cause once (a context already contained in its cause left out):
+/// what the command line prints after `error: `, and the text of the Python package's exceptions.
+pub fn error_line(e: &Error) -> String {
+    pipeline::outputs::one_line(e)
+}
+
+/// The kind of the file-system failure behind `e` (a missing file, a denied permission), when
+/// one caused it: the readers keep the [`std::io::Error`] inside their own error types (its text
+/// already in their message), and the Python package picks `FileNotFoundError`,
+/// `PermissionError`, ... from it.
+pub fn io_error_kind(e: &Error) -> Option<std::io::ErrorKind> {
+    e.chain().find_map(|cause| {
+        if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+            return Some(io.kind());
+        }
+        let raster = match cause.downcast_ref::<camera::CameraError>() {
+            Some(camera::CameraError::Raster(r)) => Some(r),
+            _ => cause.downcast_ref::<raster::RasterError>(),
+        };
+        match raster {
+            Some(raster::RasterError::Io { error, .. }) => Some(error.kind()),
+            _ => None,
+        }
+    })
 }

@@ -1,0 +1,113 @@
+"""``predict`` on numpy arrays: the command line's values bit for bit, every pixel type, progress,
+and the GIL released while it computes."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import seasonstereo
+from conftest import run_cli
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal shapes and float32 bit patterns (NaN included)."""
+    return a.shape == b.shape and np.array_equal(
+        np.ascontiguousarray(a, np.float32).view(np.uint32),
+        np.ascontiguousarray(b, np.float32).view(np.uint32))
+
+
+def texture(height=300, width=400, shift=7, seed=1):
+    """A random texture and its copy shifted by ``shift`` pixels: disparity ``shift``."""
+    wide = np.random.default_rng(seed).uniform(0, 255, (height, width + shift)).astype(np.float32)
+    return wide[:, :width].copy(), wide[:, shift:].copy()
+
+
+def test_version():
+    assert seasonstereo.__version__ == "0.1.0"
+
+
+@pytest.mark.parametrize("method,options,flags", [
+    ("mgm", {}, []),
+    ("sgm", {"census": "7x7", "p2": 40}, ["--census", "7x7", "--p2", "40"]),
+])
+def test_predict_equals_the_command_line(rectified, cli, tmp_path, method, options, flags):
+    lo, hi = rectified["range"]
+    out = tmp_path / "d.npy"
+    run_cli(cli, "predict", rectified["left"], rectified["right"], "-o", out,
+            "--range", f"{lo}:{hi}", "--method", method, *flags)
+    left, right = np.load(rectified["left"]), np.load(rectified["right"])
+    disparity = seasonstereo.predict(left, right, (lo, hi), method, **options)
+    assert disparity.dtype == np.float32 and disparity.shape == left.shape[:2]
+    assert same_bits(disparity, np.load(out))
+    assert np.isfinite(disparity).mean() > 0.5
+
+
+def test_every_pixel_type_gives_the_same_disparity():
+    left, right = texture()
+    as_float = seasonstereo.predict(left.round(), right.round(), (0, 15))
+    for dtype in (np.uint8, np.uint16):
+        got = seasonstereo.predict(left.round().astype(dtype), right.round().astype(dtype), (0, 15))
+        assert same_bits(got, as_float), dtype
+    assert np.nanmedian(as_float) == pytest.approx(7, abs=0.01)
+    # Channels last, any memory layout: three equal bands, Fortran order.
+    rgb = [np.asfortranarray(np.repeat(a.round()[:, :, None], 3, axis=2)) for a in (left, right)]
+    assert np.nanmedian(seasonstereo.predict(*rgb, (0, 15))) == pytest.approx(7, abs=0.01)
+
+
+def test_progress_reaches_the_end_and_its_exceptions_propagate():
+    left, right = texture(100, 120)
+    calls = []
+    seasonstereo.predict(left, right, (0, 15), progress=lambda *c: calls.append(c))
+    label, done, total = calls[-1]
+    assert calls[0][1] == 0 and done == total > 0 and isinstance(label, str)
+
+    def fail(*_):
+        raise KeyError("stop")
+
+    with pytest.raises(KeyError):
+        seasonstereo.predict(left, right, (0, 15), progress=fail)
+
+
+def test_the_gil_is_released_while_predict_computes():
+    """Python code keeps running in another thread while ``predict`` computes."""
+    left, right = texture(600, 800)
+    counter, running = [0], [True]
+
+    def count():
+        while running[0]:
+            counter[0] += 1
+
+    thread = threading.Thread(target=count)
+    thread.start()
+    time.sleep(0.05)
+    before = counter[0]
+    seasonstereo.predict(left, right, (0, 31))
+    during = counter[0] - before
+    running[0] = False
+    thread.join()
+    assert during > 10_000, f"the counting thread advanced {during} times during predict"
+
+
+def test_two_threads_run_at_once():
+    """Two threads calling ``predict`` finish well before two calls in a row would (the matcher
+    uses every core only in parts of its work: the other parts of two calls overlap)."""
+    left, right = texture(500, 700)
+
+    def run():
+        seasonstereo.predict(left, right, (0, 31))
+
+    run()
+    start = time.perf_counter()
+    run()
+    one = time.perf_counter() - start
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    start = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    two = time.perf_counter() - start
+    print(f"one call {one:.3f} s, two threads {two:.3f} s ({two / one:.2f}x)")
+    assert two < 0.9 * 2 * one, f"two threads took {two:.2f} s, one call {one:.2f} s"
