@@ -72,7 +72,8 @@ def predict(left: np.ndarray, right: np.ndarray, disparity_range: Optional[Tuple
     (H×W or H×W×C arrays of float32, uint8 or uint16), as ``seasonstereo predict``: census +
     MGM (``method="mgm"``) or SGM over ``disparity_range`` (inclusive pixels; estimated from the
     images when None). Options: ``p1``, ``p2``, ``four_paths``, ``lr_tolerance``,
-    ``p2_adaptive``, ``census`` ("WxH"), ``uniqueness``, ``speckle``, ``speckle_diff``."""
+    ``p2_adaptive``, ``census`` ("WxH"), ``uniqueness``, ``speckle``, ``speckle_diff``; and
+    ``threads``, this call's worker threads (default: every core, shared by all calls)."""
     return _native.predict(left, right, disparity_range, method, progress, **options)
 
 

@@ -30,6 +30,7 @@ def predict(
     uniqueness: Optional[float] = None,
     speckle: Optional[int] = None,
     speckle_diff: Optional[float] = None,
+    threads: Optional[int] = None,
 ) -> npt.NDArray[np.float32]: ...
 def rectify(
     left: _Path,

@@ -89,11 +89,7 @@ pub fn dsm<'py>(
 /// e.g. `"17N"`, names its zone).
 #[pyfunction]
 #[pyo3(signature = (path, utm_zone=None))]
-pub fn read_dsm<'py>(
-    py: Python<'py>,
-    path: PathBuf,
-    utm_zone: Option<&str>,
-) -> PyResult<Dsm<'py>> {
+pub fn read_dsm<'py>(py: Python<'py>, path: PathBuf, utm_zone: Option<&str>) -> PyResult<Dsm<'py>> {
     let zone = utm_zone
         .map(flags::utm_zone)
         .transpose()

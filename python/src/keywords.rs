@@ -31,9 +31,10 @@ impl<'py> Keywords<'py> {
         if value.is_none() {
             return Ok(None);
         }
-        value.extract().map(Some).map_err(|e| {
-            PyTypeError::new_err(format!("option {key}: {}", e.value(value.py())))
-        })
+        value
+            .extract()
+            .map(Some)
+            .map_err(|e| PyTypeError::new_err(format!("option {key}: {}", e.value(value.py()))))
     }
 
     /// A path option (`str` or `os.PathLike`).

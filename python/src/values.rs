@@ -18,7 +18,10 @@ pub fn to_python(py: Python<'_>, value: &Value) -> PyResult<PyObject> {
         },
         Value::String(s) => s.into_pyobject(py)?.into_any().unbind(),
         Value::Array(items) => {
-            let items: Vec<PyObject> = items.iter().map(|v| to_python(py, v)).collect::<PyResult<_>>()?;
+            let items: Vec<PyObject> = items
+                .iter()
+                .map(|v| to_python(py, v))
+                .collect::<PyResult<_>>()?;
             PyList::new(py, items)?.into_any().unbind()
         }
         Value::Object(map) => {
@@ -68,10 +71,17 @@ pub fn dsm_summary(d: &DsmSummary) -> Value {
 /// What `reconstruct` did: its tiles, the DSM, the scores and each step's time.
 pub fn reconstruct_summary(s: &ReconstructSummary) -> PyResult<Value> {
     let ids = |status| -> Vec<&str> {
-        s.records.iter().filter(|r| r.status == status).map(|r| r.tile.id.as_str()).collect()
+        s.records
+            .iter()
+            .filter(|r| r.status == status)
+            .map(|r| r.tile.id.as_str())
+            .collect()
     };
-    let seconds: serde_json::Map<String, Value> =
-        s.seconds.iter().map(|(k, t)| (k.to_string(), json!(t))).collect();
+    let seconds: serde_json::Map<String, Value> = s
+        .seconds
+        .iter()
+        .map(|(k, t)| (k.to_string(), json!(t)))
+        .collect();
     let scores = serde_json::to_value(&s.scores).map_err(crate::errors::value_error)?;
     Ok(json!({
         "stem": s.stem, "work": s.work,

@@ -40,8 +40,9 @@ def test_predict_equals_the_command_line(rectified, cli, tmp_path, method, optio
     left, right = np.load(rectified["left"]), np.load(rectified["right"])
     disparity = seasonstereo.predict(left, right, (lo, hi), method, **options)
     assert disparity.dtype == np.float32 and disparity.shape == left.shape[:2]
-    assert same_bits(disparity, np.load(out))
-    assert np.isfinite(disparity).mean() > 0.5
+    # The command writes NPY disparities H×W×1; Python gives them H×W.
+    assert same_bits(disparity, np.load(out)[:, :, 0])
+    assert np.isfinite(disparity).mean() > 0.2  # the rectified images' corners are NaN
 
 
 def test_every_pixel_type_gives_the_same_disparity():
@@ -90,24 +91,29 @@ def test_the_gil_is_released_while_predict_computes():
     assert during > 10_000, f"the counting thread advanced {during} times during predict"
 
 
-def test_two_threads_run_at_once():
-    """Two threads calling ``predict`` finish well before two calls in a row would (the matcher
-    uses every core only in parts of its work: the other parts of two calls overlap)."""
+def timed(f) -> float:
+    start = time.perf_counter()
+    f()
+    return time.perf_counter() - start
+
+
+def test_two_threads_take_about_as_long_as_one():
+    """Two threads calling ``predict`` with one worker thread each take about as long as one call
+    on two cores; were the GIL held while they compute, they would take twice as long."""
     left, right = texture(500, 700)
 
     def run():
-        seasonstereo.predict(left, right, (0, 31))
+        seasonstereo.predict(left, right, (0, 31), threads=1)
+
+    def both():
+        threads = [threading.Thread(target=run) for _ in range(2)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
 
     run()
-    start = time.perf_counter()
-    run()
-    one = time.perf_counter() - start
-    threads = [threading.Thread(target=run) for _ in range(2)]
-    start = time.perf_counter()
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    two = time.perf_counter() - start
+    # The best of three of each: the other processes of a shared machine only slow runs down.
+    one, two = (min(timed(f) for _ in range(3)) for f in (run, both))
     print(f"one call {one:.3f} s, two threads {two:.3f} s ({two / one:.2f}x)")
-    assert two < 0.9 * 2 * one, f"two threads took {two:.2f} s, one call {one:.2f} s"
+    assert two < 1.6 * one, f"two threads took {two:.2f} s, one call {one:.2f} s"

@@ -157,3 +157,22 @@ pub fn io_error_kind(e: &Error) -> Option<std::io::ErrorKind> {
         }
     })
 }
+
+/// Runs `work` on `threads` worker threads of its own (all the cores' shared pool when `None`):
+/// a caller that runs several calls at once (Python threads, a job scheduler) gives each its
+/// share of the cores instead of queueing them all on the one shared pool.
+pub fn with_threads<T: Send>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> Result<T> + Send,
+) -> Result<T> {
+    let Some(n) = threads else {
+        return work();
+    };
+    if n == 0 {
+        anyhow::bail!("threads must be at least 1 (got 0)");
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()?
+        .install(work)
+}
