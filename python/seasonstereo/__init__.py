@@ -11,7 +11,8 @@ Cameras (``rpc_left``, ``rpc_right``) are a path to the product's SatNeRF/rpcm J
 carrying its RPC tag, or an rpcm-format dict (the bare ``rpc`` dictionary or a whole SatNeRF
 JSON). Errors are ``FileNotFoundError`` (naming the file), ``OSError``, ``ValueError`` (bad
 values) or ``TypeError`` (unknown options). Every call releases the GIL while it computes, so
-threads run in parallel; ``progress`` takes a callable ``progress(label, done, total)``.
+threads run in parallel; ``progress`` takes a callable ``progress(label, done, total)``, or
+``True`` for tqdm bars when tqdm is installed.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ __all__ = ["Dsm", "predict", "rectify", "dsm", "read_dsm", "score", "reconstruct
 
 PathLike = Union[str, "os.PathLike[str]"]
 Camera = Union[PathLike, dict]
-Progress = Optional[Callable[[str, int, int], Any]]
+Progress = Union[None, bool, Callable[[str, int, int], Any]]
 
 
 class Dsm(NamedTuple):
@@ -66,6 +67,27 @@ def _cameras(*cameras: Optional[Camera]) -> Iterator[list]:
         yield paths + [folder]
 
 
+def _progress(progress: Progress) -> Optional[Callable[[str, int, int], Any]]:
+    """The callback of ``progress``: itself, or with ``True`` one tqdm bar per loop (none
+    without tqdm: progress is a nicety, never a dependency)."""
+    if progress is not True:
+        return progress or None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    bar: list = [None]
+
+    def update(label: str, done: int, total: int) -> None:
+        if done == 0 or bar[0] is None:
+            bar[0] = tqdm(total=total, desc=label, leave=False)
+        bar[0].update(done - bar[0].n)
+        if done >= total:
+            bar[0].close()
+
+    return update
+
+
 def predict(left: np.ndarray, right: np.ndarray, disparity_range: Optional[Tuple[int, int]] = None,
             method: str = "mgm", *, progress: Progress = None, **options: Any) -> np.ndarray:
     """The disparity (H×W float32, NaN = invalid) of the rectified pair ``left``, ``right``
@@ -74,17 +96,19 @@ def predict(left: np.ndarray, right: np.ndarray, disparity_range: Optional[Tuple
     images when None). Options: ``p1``, ``p2``, ``four_paths``, ``lr_tolerance``,
     ``p2_adaptive``, ``census`` ("WxH"), ``uniqueness``, ``speckle``, ``speckle_diff``; and
     ``threads``, this call's worker threads (default: every core, shared by all calls)."""
-    return _native.predict(left, right, disparity_range, method, progress, **options)
+    return _native.predict(left, right, disparity_range, method, _progress(progress), **options)
 
 
 def rectify(left: PathLike, right: PathLike, out: PathLike, *, rpc_left: Optional[Camera] = None,
-            rpc_right: Optional[Camera] = None, **options: Any) -> dict:
+            rpc_right: Optional[Camera] = None, progress: Progress = None,
+            **options: Any) -> dict:
     """Rectifies a raw pair from its RPCs into the folder ``out`` (``L/``, ``R/``,
     ``homography/``, ``rectify/``), as ``seasonstereo rectify``. Options: ``roi`` (x, y, w, h),
-    ``alt_range`` (min, max metres), ``stem``, ``progress``. Returns the paths written and the
+    ``alt_range`` (min, max metres), ``stem``. Returns the paths written and the
     ``disparity_range`` for :func:`predict`."""
     with _cameras(rpc_left, rpc_right) as (l, r, _):
-        return _native.rectify(left, right, out, rpc_left=l, rpc_right=r, **options)
+        return _native.rectify(left, right, out, rpc_left=l, rpc_right=r,
+                               progress=_progress(progress), **options)
 
 
 def dsm(disparity: Union[PathLike, np.ndarray], homography: PathLike, rpc_left: Camera,
@@ -126,5 +150,6 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     of :func:`predict`. Returns the tiles, the DSM's grid and coverage, ``scores`` (with
     ``truth``) and each step's ``seconds``."""
     with _cameras(rpc_left, rpc_right) as (l, r, _):
-        return _native.reconstruct(left, right, out=out, method=method, progress=progress,
+        return _native.reconstruct(left, right, out=out, method=method,
+                                   progress=_progress(progress),
                                    rpc_left=l, rpc_right=r, **options)
