@@ -191,3 +191,55 @@ pub fn gridding(name: &str) -> Result<camera::Gridding> {
         _ => bail!("unknown gridding {name:?}: expected max or median"),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_flags_are_the_library_defaults() {
+        assert_eq!(
+            ClassicalFlags::default().params().unwrap(),
+            SgmParams::default()
+        );
+    }
+
+    #[test]
+    fn zero_turns_the_filters_off() {
+        let flags = ClassicalFlags {
+            lr_tolerance: 0.0,
+            uniqueness: 0.0,
+            speckle: 0,
+            ..ClassicalFlags::default()
+        };
+        let p = flags.params().unwrap();
+        assert_eq!(
+            (p.lr_tolerance, p.uniqueness, p.speckle),
+            (None, None, None)
+        );
+        assert_eq!(
+            (fill_cells(0), median_cells(1), median_cells(7)),
+            (None, None, Some(7))
+        );
+    }
+
+    #[test]
+    fn names_and_windows_parse_or_say_what_is_expected() {
+        assert_eq!(
+            census_window("9x7").unwrap(),
+            CensusWindow {
+                width: 9,
+                height: 7
+            }
+        );
+        assert!(census_window("4x4").unwrap_err().contains("odd sides"));
+        assert_eq!(format_census(census_window("5X5").unwrap()), "5x5");
+        assert_eq!(method("SGM").unwrap(), Aggregation::Sgm);
+        assert!(method("bm").unwrap_err().to_string().contains("mgm or sgm"));
+        assert!(gridding("mean").is_err());
+        assert_eq!(utm_zone("17N").unwrap().epsg(), 32617);
+        assert!(utm_zone("17X").is_err());
+        assert!(memory_bytes(-1.0).is_err());
+        assert_eq!(memory_bytes(2.0).unwrap(), 2 << 30);
+    }
+}
