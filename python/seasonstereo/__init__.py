@@ -21,6 +21,7 @@ import contextlib
 import json
 import os
 import tempfile
+import warnings
 from typing import Any, Callable, Iterator, NamedTuple, Optional, Tuple, Union
 
 import numpy as np
@@ -147,9 +148,13 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     ``truth``, ``resolution``, ``epsg``, ``gridding``, ``fill_holes``, ``median_filter``,
     ``roi``, ``roi_lonlat``, ``alt_range``, ``tile``, ``collar``, ``max_memory`` (GiB),
     ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates`` and the matcher's options
-    of :func:`predict`. Returns the tiles, the DSM's grid and coverage, ``scores`` (with
-    ``truth``) and each step's ``seconds``."""
+    of :func:`predict`. Returns the tiles (``failed`` ones included: the DSM holds the others),
+    the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds`` and the
+    ``warnings`` the command prints (also issued as Python warnings)."""
     with _cameras(rpc_left, rpc_right) as (l, r, _):
-        return _native.reconstruct(left, right, out=out, method=method,
-                                   progress=_progress(progress),
-                                   rpc_left=l, rpc_right=r, **options)
+        summary = _native.reconstruct(left, right, out=out, method=method,
+                                      progress=_progress(progress),
+                                      rpc_left=l, rpc_right=r, **options)
+    for line in summary["warnings"]:
+        warnings.warn(line, stacklevel=2)
+    return summary

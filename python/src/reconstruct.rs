@@ -13,8 +13,8 @@ use crate::progress::Callback;
 use crate::values::{reconstruct_summary, to_python};
 
 /// Reconstructs the DSM of the raw pair `left`, `right` into `out`; returns a dict with the
-/// tiles, the DSM's grid (`transform`, `crs`) and coverage, the scores (with `truth`) and each
-/// step's time in seconds.
+/// tiles, the DSM's grid (`transform`, `crs`) and coverage, the scores (with `truth`), each
+/// step's time in seconds and the warnings (failed tiles, suspect cameras).
 #[pyfunction]
 #[pyo3(signature = (left, right, *, out, method="mgm", progress=None, **options))]
 pub fn reconstruct(
@@ -31,9 +31,10 @@ pub fn reconstruct(
     keywords.finish()?;
     let callback = Callback::new(progress);
     let result = compute(py, || seasonstereo::reconstruct(&options, &callback));
-    let mut summary = reconstruct_summary(&callback.finish(result)?)?;
-    summary["output"] = options.output.display().to_string().into();
-    to_python(py, &summary)
+    to_python(
+        py,
+        &reconstruct_summary(&callback.finish(result)?, &options)?,
+    )
 }
 
 /// The library's options: its defaults (those of the command line), then the keywords given.

@@ -4,7 +4,9 @@
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use seasonstereo::{DsmGrid, DsmSummary, ReconstructSummary, RectifySummary, TileStatus};
+use seasonstereo::{
+    DsmGrid, DsmSummary, ReconstructOptions, ReconstructSummary, RectifySummary, TileStatus,
+};
 use serde_json::{json, Value};
 
 /// A JSON value as the Python object `json.loads` would give.
@@ -68,8 +70,9 @@ pub fn dsm_summary(d: &DsmSummary) -> Value {
     })
 }
 
-/// What `reconstruct` did: its tiles, the DSM, the scores and each step's time.
-pub fn reconstruct_summary(s: &ReconstructSummary) -> PyResult<Value> {
+/// What `reconstruct` did: its tiles, the DSM, the scores, each step's time, and the warnings
+/// the command line prints.
+pub fn reconstruct_summary(s: &ReconstructSummary, o: &ReconstructOptions) -> PyResult<Value> {
     let ids = |status| -> Vec<&str> {
         s.records
             .iter()
@@ -92,5 +95,6 @@ pub fn reconstruct_summary(s: &ReconstructSummary) -> PyResult<Value> {
         },
         "disparity_range": s.disparity_range(), "matched": s.matched(),
         "dsm": s.dsm.as_ref().map(dsm_summary), "scores": scores, "seconds": seconds,
+        "output": o.output, "warnings": s.warnings(o),
     }))
 }

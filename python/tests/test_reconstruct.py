@@ -23,8 +23,10 @@ def test_reconstruct_writes_the_command_line_s_dsm(dev, cli, tmp_path):
                                  progress=lambda *c: calls.append(c))
     assert filecmp.cmp(tmp_path / "cli.tif", tmp_path / "py.tif", shallow=False)
     assert s["output"] == str(tmp_path / "py.tif") and s["tiles"]["failed"] == []
+    assert s["warnings"] == []
     assert s["dsm"]["crs"] == "EPSG:32617" and s["dsm"]["width"] == 512
     assert set(s["seconds"]) == {"tiles", "merge"} and calls
     assert f"MAE filtered {s['scores']['mae_filtered']:.3f} m" in said
     for key, value in SCORES.items():
         assert s["scores"][key] == pytest.approx(value, abs=1e-5), key
+

@@ -112,11 +112,13 @@ pub struct ReconstructArgs {
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tile, a.collar, a.output.clone());
-    let cameras = a.camera_names();
     a.guard_output()?;
-    let s = reconstruct(&a.options()?, progress)?;
+    let options = a.options()?;
+    let s = reconstruct(&options, progress)?;
     println!("{}", tiles_line(&s, tile, collar));
-    print_warnings(&s, &cameras);
+    for w in s.warnings(&options) {
+        eprintln!("warning: {w}");
+    }
     let Some(dsm) = &s.dsm else {
         println!(
             "{} tiles belong to other shards and are not finished (first: {}); the DSM is written \
@@ -131,20 +133,6 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
     failed_tiles(&s)
-}
-
-/// The failed tiles, one warning each, and cameras that do not fit their images.
-fn print_warnings(s: &ReconstructSummary, cameras: &[String; 2]) {
-    for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
-        eprintln!(
-            "warning: tile {} failed (rerun the same command to retry it): {}",
-            r.tile.id,
-            r.error.as_deref().unwrap_or("no message")
-        );
-    }
-    if let Some(w) = s.parallax_warning([&cameras[0], &cameras[1]]) {
-        eprintln!("warning: {w}");
-    }
 }
 
 /// Exit code 2 when some tiles failed (the DSM holds the others).
@@ -213,18 +201,6 @@ impl ReconstructArgs {
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
         crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
-    }
-
-    /// How the cameras are named in warnings: the JSON files, or the images' RPC tags.
-    fn camera_names(&self) -> [String; 2] {
-        let name = |rpc: &Option<PathBuf>, image: &PathBuf| match rpc {
-            Some(p) => p.display().to_string(),
-            None => format!("the RPC tag of {}", image.display()),
-        };
-        [
-            name(&self.rpc_left, &self.left),
-            name(&self.rpc_right, &self.right),
-        ]
     }
 }
 

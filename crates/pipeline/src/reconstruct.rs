@@ -101,6 +101,27 @@ impl ReconstructSummary {
         v.get(v.len() / 2).copied()
     }
 
+    /// The run's warnings, one line each: every failed tile with its error, and cameras that do
+    /// not fit their images ([`Self::parallax_warning`], naming them as `opts` gives them).
+    pub fn warnings(&self, opts: &ReconstructOptions) -> Vec<String> {
+        let failed = self
+            .records
+            .iter()
+            .filter(|r| r.status == TileStatus::Failed);
+        let mut lines: Vec<String> = failed
+            .map(|r| {
+                format!(
+                    "tile {} failed (rerun the same command to retry it): {}",
+                    r.tile.id,
+                    r.error.as_deref().unwrap_or("no message")
+                )
+            })
+            .collect();
+        let cameras = opts.camera_names();
+        lines.extend(self.parallax_warning([&cameras[0], &cameras[1]]));
+        lines
+    }
+
     /// A warning when the rectified views disagree by rows, as they do when an RPC is not its
     /// image's (swapped cameras, another acquisition's bundle adjustment): `cameras` names them.
     pub fn parallax_warning(&self, cameras: [&str; 2]) -> Option<String> {

@@ -111,4 +111,16 @@ impl ReconstructOptions {
             ),
         }
     }
+
+    /// How the cameras are named in messages: the JSON files, or the images' RPC tags.
+    pub fn camera_names(&self) -> [String; 2] {
+        let name = |rpc: &Option<PathBuf>, image: &PathBuf| match rpc {
+            Some(p) => p.display().to_string(),
+            None => format!("the RPC tag of {}", image.display()),
+        };
+        [
+            name(&self.rpc_left, &self.left),
+            name(&self.rpc_right, &self.right),
+        ]
+    }
 }
