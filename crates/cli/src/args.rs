@@ -8,9 +8,10 @@ use camera::rectify::Roi;
 use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
 use dataset::Shard;
-use matching::{Paths, SgmParams};
+use matching::SgmParams;
 use nn::device::DeviceChoice;
 use pipeline::dsm::GridChoice;
+use pipeline::flags::{census_window, format_census, ClassicalFlags};
 use pipeline::matcher::{Matcher, MonsterOptions};
 use pipeline::stage::BatchSummary;
 
@@ -190,61 +191,26 @@ pub struct SgmArgs {
     speckle_diff: f32,
 }
 
-fn format_census(c: matching::CensusWindow) -> String {
-    format!("{}x{}", c.width, c.height)
-}
-
 fn parse_census(s: &str) -> Result<String, String> {
     census_window(s).map(|_| s.to_string())
-}
-
-fn census_window(s: &str) -> Result<matching::CensusWindow, String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected WxH, e.g. 9x7, got {s:?}"))?;
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<usize>()
-            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
-    };
-    let c = matching::CensusWindow {
-        width: parse(w)?,
-        height: parse(h)?,
-    };
-    if !c.is_valid() {
-        return Err(format!(
-            "census window {s:?} needs odd sides and at most 65 pixels"
-        ));
-    }
-    Ok(c)
 }
 
 impl SgmArgs {
     /// The classical matcher's parameters with `aggregation`.
     pub fn params(&self, aggregation: matching::Aggregation) -> Result<SgmParams> {
-        let params = SgmParams {
+        ClassicalFlags {
+            method: aggregation,
             p1: self.p1,
             p2: self.p2,
-            aggregation,
-            paths: if self.four_paths {
-                Paths::Four
-            } else {
-                Paths::Eight
-            },
-            lr_tolerance: (self.lr_tolerance > 0.0).then_some(self.lr_tolerance),
-            p2_adaptive: (self.p2_adaptive > 0.0).then_some(self.p2_adaptive),
+            four_paths: self.four_paths,
+            lr_tolerance: self.lr_tolerance,
+            p2_adaptive: self.p2_adaptive,
             census: census_window(&self.census).map_err(anyhow::Error::msg)?,
-            uniqueness: (self.uniqueness > 0.0).then_some(self.uniqueness),
-            speckle: (self.speckle > 1).then_some(matching::Speckle {
-                min_area: self.speckle,
-                max_diff: self.speckle_diff,
-            }),
-            ..SgmParams::default()
-        };
-        params
-            .check()
-            .context("the classical matcher's flags (--p1, --p2, --census, --lr-tolerance, ...)")?;
-        Ok(params)
+            uniqueness: self.uniqueness,
+            speckle: self.speckle,
+            speckle_diff: self.speckle_diff,
+        }
+        .params()
     }
 }
 
@@ -357,26 +323,22 @@ pub fn parse_box(s: &str, names: &str) -> Result<[f64; 4], String> {
 pub struct TilingArgs {
     /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
     /// (an affine rectification holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    #[arg(long, value_name = "PX", default_value_t = pipeline::reconstruct::options::DEFAULT_TILE)]
     pub tile: usize,
     /// Overlap collar around each tile, pixels: context for the matcher; only the points of
     /// each tile's core are kept, so the collar never shows as a seam.
-    #[arg(long, value_name = "PX", default_value_t = 64)]
+    #[arg(long, value_name = "PX", default_value_t = pipeline::reconstruct::options::DEFAULT_COLLAR)]
     pub collar: usize,
     /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
     /// and only as many tiles as fit run at once (at most one per core).
-    #[arg(long, value_name = "GIB", default_value_t = 2.0)]
+    #[arg(long, value_name = "GIB", default_value_t = pipeline::reconstruct::options::DEFAULT_MEMORY_GIB)]
     pub max_memory: f64,
 }
 
 impl TilingArgs {
     /// The memory budget in bytes.
     pub fn max_memory_bytes(&self) -> Result<u64> {
-        let gib = self.max_memory;
-        if !(gib.is_finite() && gib > 0.0) {
-            bail!("--max-memory must be a positive number of GiB, got {gib}");
-        }
-        Ok((gib * (1u64 << 30) as f64) as u64)
+        pipeline::flags::memory_bytes(self.max_memory)
     }
 }
 
@@ -387,7 +349,7 @@ pub struct GridArgs {
     #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
     pub like: Option<PathBuf>,
     /// Cell size in metres (without --like; the grid covers the scene).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = pipeline::flags::RESOLUTION)]
     pub resolution: f64,
     /// EPSG code of the UTM zone (without --like; default: the scene's zone).
     #[arg(long)]
@@ -397,13 +359,6 @@ pub struct GridArgs {
 impl GridArgs {
     /// The library's grid choice.
     pub fn choice(&self) -> GridChoice {
-        match &self.like {
-            Some(p) => GridChoice::Like(p.clone()),
-            None => GridChoice::Resolution {
-                resolution: self.resolution,
-                bounds: None,
-                epsg: self.epsg,
-            },
-        }
+        pipeline::flags::grid(self.like.clone(), self.resolution, None, self.epsg)
     }
 }

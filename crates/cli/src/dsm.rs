@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::dsm::{disparity_to_dsm, DsmOptions, GridChoice};
+use pipeline::dsm::{disparity_to_dsm, DsmOptions};
+use pipeline::flags;
 
 #[derive(Args)]
 pub struct DsmArgs {
@@ -27,7 +28,7 @@ pub struct DsmArgs {
     #[arg(long, conflicts_with_all = ["resolution", "bounds", "epsg"])]
     like: Option<PathBuf>,
     /// Cell size in metres.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = flags::RESOLUTION)]
     resolution: f64,
     /// UTM bounds XMIN,YMIN,XMAX,YMAX in metres (default: the extent of the points).
     #[arg(long, value_name = "XMIN,YMIN,XMAX,YMAX", value_parser = parse_bounds, allow_hyphen_values = true)]
@@ -71,23 +72,11 @@ impl DsmArgs {
         ];
         crate::exit::guard_output("-o", &self.output, &inputs.map(|p| p.as_path()))
     }
-
-    /// The DSM's grid: a reference DSM's, or a UTM grid of the given resolution.
-    fn grid(&self) -> GridChoice {
-        match &self.like {
-            Some(path) => GridChoice::Like(path.clone()),
-            None => GridChoice::Resolution {
-                resolution: self.resolution,
-                bounds: self.bounds,
-                epsg: self.epsg,
-            },
-        }
-    }
 }
 
 pub fn run(a: DsmArgs) -> Result<()> {
     a.guard_output()?;
-    let grid = a.grid();
+    let grid = flags::grid(a.like, a.resolution, a.bounds, a.epsg);
     let s = disparity_to_dsm(&DsmOptions {
         disparity: a.disparity,
         homography: a.homography,
@@ -96,8 +85,8 @@ pub fn run(a: DsmArgs) -> Result<()> {
         grid,
         border: a.border,
         gridding: a.gridding.into(),
-        fill_holes: (a.fill_holes > 0).then_some(a.fill_holes),
-        median_filter: (a.median_filter > 1).then_some(a.median_filter),
+        fill_holes: flags::fill_cells(a.fill_holes),
+        median_filter: flags::median_cells(a.median_filter),
         output: a.output.clone(),
         compare: a.compare,
     })?;

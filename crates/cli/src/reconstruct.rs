@@ -2,11 +2,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use seasonstereo::{
     reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, TileStatus,
 };
+
+use pipeline::flags;
 
 use crate::args::{
     parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs, ShardArg, TilingArgs,
@@ -77,12 +79,12 @@ pub struct ReconstructArgs {
     /// Fill the DSM's holes enclosed by data within this many cells, ground first (the ground
     /// hidden behind buildings, unmatched patches); 0 leaves them empty, as the benchmark's
     /// protocol does.
-    #[arg(long, value_name = "CELLS", default_value_t = 40)]
+    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_CELLS)]
     fill_holes: usize,
     /// Median filter of the DSM over this odd window of cells, after the filling: removes the
     /// roughness of single-pair matching on roofs and ground and keeps building edges (7 cells =
     /// 3.5 m at 0.5 m); 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = 7)]
+    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_MEDIAN_CELLS)]
     median_filter: usize,
     /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)
     /// with the benchmark's metric; needs --like on the same file.
@@ -94,11 +96,13 @@ pub struct ReconstructArgs {
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tiling.tile, a.tiling.collar, a.output.clone());
-    let cameras = a.camera_names();
     a.guard_output()?;
-    let s = reconstruct(&a.options()?, progress)?;
+    let options = a.options()?;
+    let s = reconstruct(&options, progress)?;
     println!("{}", tiles_line(&s, tile, collar));
-    print_warnings(&s, &cameras);
+    for w in s.warnings(&options) {
+        eprintln!("warning: {w}");
+    }
     let Some(dsm) = &s.dsm else {
         println!(
             "{} tiles belong to other shards and are not finished (first: {}); the DSM is written \
@@ -113,20 +117,6 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
     failed_tiles(&s)
-}
-
-/// The failed tiles, one warning each, and cameras that do not fit their images.
-fn print_warnings(s: &ReconstructSummary, cameras: &[String; 2]) {
-    for r in s.records.iter().filter(|r| r.status == TileStatus::Failed) {
-        eprintln!(
-            "warning: tile {} failed (rerun the same command to retry it): {}",
-            r.tile.id,
-            r.error.as_deref().unwrap_or("no message")
-        );
-    }
-    if let Some(w) = s.camera_warning([&cameras[0], &cameras[1]]) {
-        eprintln!("warning: {w}");
-    }
 }
 
 /// Exit code 2 when some tiles failed (the DSM holds the others).
@@ -151,8 +141,6 @@ fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
 impl ReconstructArgs {
     /// The library's options for these flags.
     fn options(self) -> Result<ReconstructOptions> {
-        self.check_truth()?;
-        let grid = self.grid.choice();
         Ok(ReconstructOptions {
             matcher: self.matcher.matcher()?,
             max_memory: self.tiling.max_memory_bytes()?,
@@ -165,10 +153,10 @@ impl ReconstructArgs {
             alt_range: self.alt_range,
             output: self.output,
             work_dir: self.work,
-            grid,
+            grid: self.grid.choice(),
             gridding: self.gridding.into(),
-            fill_holes: (self.fill_holes > 0).then_some(self.fill_holes),
-            median_filter: (self.median_filter > 1).then_some(self.median_filter),
+            fill_holes: flags::fill_cells(self.fill_holes),
+            median_filter: flags::median_cells(self.median_filter),
             border: 0,
             truth: self.truth,
             tile: self.tiling.tile,
@@ -197,31 +185,6 @@ impl ReconstructArgs {
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
         crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
-    }
-
-    /// How the cameras are named in warnings: the JSON files, or the images' RPC tags.
-    fn camera_names(&self) -> [String; 2] {
-        let name = |rpc: &Option<PathBuf>, image: &PathBuf| match rpc {
-            Some(p) => p.display().to_string(),
-            None => format!("the RPC tag of {}", image.display()),
-        };
-        [
-            name(&self.rpc_left, &self.left),
-            name(&self.rpc_right, &self.right),
-        ]
-    }
-
-    /// The scores need the truth's grid: `--truth` must be the `--like` DSM.
-    fn check_truth(&self) -> Result<()> {
-        if let (Some(t), Some(l)) = (&self.truth, &self.grid.like) {
-            if t != l {
-                bail!(
-                    "--truth {} must be the DSM given to --like (the scores need its grid)",
-                    t.display()
-                );
-            }
-        }
-        Ok(())
     }
 }
 

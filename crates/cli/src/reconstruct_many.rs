@@ -163,16 +163,15 @@ impl ReconstructManyArgs {
             grid,
             self.output,
         );
-        let on = |cells: usize| (cells > 1).then_some(cells);
         o.work_dir = self.work;
         o.pairs = self.pairs;
         o.dry_run = self.dry_run;
         o.cluster_tolerance = self.cluster_tolerance;
         o.min_support = self.min_support;
         o.co_register = self.register;
-        o.fill_holes = (self.fill_holes > 0).then_some(self.fill_holes);
-        o.median_filter = on(self.median_filter);
-        o.pair_median_filter = on(self.pair_median_filter);
+        o.fill_holes = pipeline::flags::fill_cells(self.fill_holes);
+        o.median_filter = pipeline::flags::median_cells(self.median_filter);
+        o.pair_median_filter = pipeline::flags::median_cells(self.pair_median_filter);
         o.truth = self.truth;
         o.alt_range = self.alt_range;
         o.gridding = self.gridding.into();

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::Result;
 use clap::Args;
 use seasonstereo::{read_truth, score, score_against, CellsMae, DsmScores, Truth, Versus};
 
@@ -71,7 +71,7 @@ pub struct ScoreArgs {
     truth: PathBuf,
     /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (Jacksonville), 15N (Omaha),
     /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
-    #[arg(long, value_name = "ZONE", value_parser = parse_zone)]
+    #[arg(long, value_name = "ZONE", value_parser = pipeline::flags::utm_zone)]
     utm_zone: Option<camera::UtmZone>,
     /// Compare each DSM with this one (another method's DSM on the truth's grid) on the cells
     /// both cover and on those only one covers.
@@ -84,38 +84,6 @@ pub struct ScoreArgs {
     json: Option<PathBuf>,
 }
 
-fn parse_zone(s: &str) -> Result<camera::UtmZone, String> {
-    let t = s.trim().to_ascii_uppercase();
-    let (num, hemi) = t.split_at(t.len().saturating_sub(1));
-    let north = match hemi {
-        "N" => true,
-        "S" => false,
-        _ => return Err(format!("expected a zone like 17N or 21S, got {s:?}")),
-    };
-    let zone: u8 = num
-        .parse()
-        .map_err(|e| format!("zone number in {s:?}: {e}"))?;
-    camera::UtmZone::new(zone, north).map_err(|e| e.to_string())
-}
-
-/// The truth's UTM zone: `--utm-zone`, else the first DSM's.
-fn utm_zone(a: &ScoreArgs) -> Result<camera::UtmZone> {
-    if let Some(z) = a.utm_zone {
-        return Ok(z);
-    }
-    let dsm = &a.dsm[0];
-    if !dsm.is_file() {
-        bail!("{}: no such file", dsm.display());
-    }
-    let grid = camera::DsmGrid::read(dsm, None).with_context(|| {
-        format!(
-            "{}: cannot take the UTM zone from this DSM; give --utm-zone",
-            dsm.display()
-        )
-    })?;
-    Ok(grid.zone())
-}
-
 pub fn run(a: ScoreArgs) -> Result<()> {
     if let Some(j) = &a.json {
         let inputs: Vec<&std::path::Path> = a
@@ -126,7 +94,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             .collect();
         crate::exit::guard_output("--json", j, &inputs)?;
     }
-    let zone = utm_zone(&a)?;
+    let zone = pipeline::score::truth_zone(&a.dsm[0], a.utm_zone)?;
     let truth = read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {

@@ -32,6 +32,10 @@ const PLANS: &[(&str, Plan)] = &[
         "seasonstereo reconstruct $D/images/JAX_068_006_RGB.tif",
         Run,
     ),
+    (
+        "pip install ./python",
+        Skip("builds the Python package; .ci/run installs it and runs python/tests"),
+    ),
     ("seasonstereo score out/jax/006-020.tif", Run),
     (
         "seasonstereo reconstruct-many $D/images/*.tif",

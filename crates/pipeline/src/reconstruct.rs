@@ -107,6 +107,27 @@ impl ReconstructSummary {
         v.get(v.len() / 2).copied()
     }
 
+    /// The run's warnings, one line each: every failed tile with its error, and cameras that do
+    /// not fit their images ([`Self::camera_warning`], naming them as `opts` gives them).
+    pub fn warnings(&self, opts: &ReconstructOptions) -> Vec<String> {
+        let failed = self
+            .records
+            .iter()
+            .filter(|r| r.status == TileStatus::Failed);
+        let mut lines: Vec<String> = failed
+            .map(|r| {
+                format!(
+                    "tile {} failed (rerun the same command to retry it): {}",
+                    r.tile.id,
+                    r.error.as_deref().unwrap_or("no message")
+                )
+            })
+            .collect();
+        let cameras = opts.camera_names();
+        lines.extend(self.camera_warning([&cameras[0], &cameras[1]]));
+        lines
+    }
+
     /// A warning when the cameras look wrong for their images (swapped, another acquisition's
     /// bundle adjustment): the rectified views disagree by rows, or, where too few patches match
     /// to measure that, matching along the rows found almost nothing. `cameras` names them.
@@ -177,6 +198,7 @@ pub fn reconstruct(
     opts: &ReconstructOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
+    opts.check_truth()?;
     check_tile_side(opts.tile)?;
     let work = opts
         .work_dir

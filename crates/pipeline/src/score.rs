@@ -13,6 +13,25 @@ use crate::eval::metrics::{score_dsm, DsmScores};
 use crate::eval::versus::{score_versus, Versus};
 use crate::eval::Truth;
 
+/// The UTM zone of a truth without its own (a DFC2019 plain TIFF + `.txt`): `zone` when given,
+/// else that of the DSM to score (its GeoTIFF EPSG code).
+pub fn truth_zone(dsm: &Path, zone: Option<UtmZone>) -> Result<UtmZone> {
+    if let Some(z) = zone {
+        return Ok(z);
+    }
+    if !dsm.is_file() {
+        let missing = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        return Err(anyhow::Error::new(missing).context(dsm.display().to_string()));
+    }
+    let grid = camera::DsmGrid::read(dsm, None).with_context(|| {
+        format!(
+            "{}: cannot take the UTM zone from this DSM; give --utm-zone",
+            dsm.display()
+        )
+    })?;
+    Ok(grid.zone())
+}
+
 /// The truth of a `<AOI>_DSM.tif` path: the DSM, and the `<AOI>_CLS.tif` and `<AOI>_WATER.png`
 /// beside it. `zone` is used when the DSM is a DFC2019 plain TIFF with a `.txt` georeference.
 pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {

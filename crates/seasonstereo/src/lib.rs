@@ -48,7 +48,9 @@
 use std::path::Path;
 
 pub use anyhow::{Error, Result};
-pub use camera::{DsmGrid, Gridding, RpcModel, UtmZone};
+pub use camera::rectify::Roi;
+pub use camera::{read_dsm, DsmGrid, DsmRaster, Gridding, RpcModel, UtmZone};
+pub use dataset::Shard;
 pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
 pub use pipeline::eval::metrics::DsmScores;
@@ -65,7 +67,8 @@ pub use pipeline::reconstruct::select::{PairChoice, PairTerms, View};
 pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};
 pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary};
 pub use pipeline::rectify::{RectifyOptions, RectifySummary};
-pub use pipeline::{Progress, Silent};
+pub use pipeline::score::truth_zone;
+pub use pipeline::{flags, Progress, Silent};
 pub use raster::Image;
 
 pub mod stages;
@@ -158,4 +161,49 @@ pub fn score_against(dsm: &Path, other: &Path, truth: &Truth) -> Result<Versus> 
 /// the paper's Table 1.
 pub fn eval(options: &EvalOptions, progress: &dyn Progress) -> Result<EvalReport> {
     pipeline::eval::evaluate(options, progress)
+}
+
+/// An error as one line, each cause once (a context already contained in its cause left out):
+/// what the command line prints after `error: `, and the text of the Python package's exceptions.
+pub fn error_line(e: &Error) -> String {
+    pipeline::outputs::one_line(e)
+}
+
+/// The kind of the file-system failure behind `e` (a missing file, a denied permission), when
+/// one caused it: the readers keep the [`std::io::Error`] inside their own error types (its text
+/// already in their message), and the Python package picks `FileNotFoundError`,
+/// `PermissionError`, ... from it.
+pub fn io_error_kind(e: &Error) -> Option<std::io::ErrorKind> {
+    e.chain().find_map(|cause| {
+        if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+            return Some(io.kind());
+        }
+        let raster = match cause.downcast_ref::<camera::CameraError>() {
+            Some(camera::CameraError::Raster(r)) => Some(r),
+            _ => cause.downcast_ref::<raster::RasterError>(),
+        };
+        match raster {
+            Some(raster::RasterError::Io { error, .. }) => Some(error.kind()),
+            _ => None,
+        }
+    })
+}
+
+/// Runs `work` on `threads` worker threads of its own (all the cores' shared pool when `None`):
+/// a caller that runs several calls at once (Python threads, a job scheduler) gives each its
+/// share of the cores instead of queueing them all on the one shared pool.
+pub fn with_threads<T: Send>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> Result<T> + Send,
+) -> Result<T> {
+    let Some(n) = threads else {
+        return work();
+    };
+    if n == 0 {
+        anyhow::bail!("threads must be at least 1 (got 0)");
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()?
+        .install(work)
 }

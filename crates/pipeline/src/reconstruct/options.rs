@@ -10,6 +10,13 @@ use dataset::shard::Shard;
 use crate::dsm::{GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
 use crate::matcher::Matcher;
 
+/// Tile side, left raw pixels: an affine rectification holds over about a kilometre.
+pub const DEFAULT_TILE: usize = 1024;
+/// Overlap collar around each tile, pixels.
+pub const DEFAULT_COLLAR: usize = 64;
+/// Memory budget of a run, GiB.
+pub const DEFAULT_MEMORY_GIB: f64 = 2.0;
+
 /// What to reconstruct and how.
 #[derive(Clone, Debug)]
 pub struct ReconstructOptions {
@@ -82,12 +89,38 @@ impl ReconstructOptions {
             median_filter: Some(DEFAULT_MEDIAN_CELLS),
             border: 0,
             truth: None,
-            tile: 1024,
-            collar: 64,
-            max_memory: 2 << 30,
+            tile: DEFAULT_TILE,
+            collar: DEFAULT_COLLAR,
+            max_memory: (DEFAULT_MEMORY_GIB * (1u64 << 30) as f64) as u64,
             shard: Shard::ALL,
             merge_only: false,
             keep_intermediates: false,
         }
+    }
+
+    /// The scores need the truth's grid: `truth` must be the DSM whose grid is used (`Like`).
+    pub fn check_truth(&self) -> anyhow::Result<()> {
+        let Some(truth) = &self.truth else {
+            return Ok(());
+        };
+        match &self.grid {
+            GridChoice::Like(like) if like == truth => Ok(()),
+            _ => anyhow::bail!(
+                "--truth {} must be the DSM given to --like (the scores need its grid)",
+                truth.display()
+            ),
+        }
+    }
+
+    /// How the cameras are named in messages: the JSON files, or the images' RPC tags.
+    pub fn camera_names(&self) -> [String; 2] {
+        let name = |rpc: &Option<PathBuf>, image: &PathBuf| match rpc {
+            Some(p) => p.display().to_string(),
+            None => format!("the RPC tag of {}", image.display()),
+        };
+        [
+            name(&self.rpc_left, &self.left),
+            name(&self.rpc_right, &self.right),
+        ]
     }
 }

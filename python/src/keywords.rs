@@ -1,0 +1,79 @@
+//! Keyword options (`**options`) read into the library's flag values ([`seasonstereo::flags`]):
+//! the same names, defaults and meanings as the command line's flags, underscores for dashes.
+
+use std::path::PathBuf;
+
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use seasonstereo::flags::{self, ClassicalFlags};
+
+use crate::errors::{exception, value_error};
+
+/// The keywords of one call, taken one by one; any left at the end were misspelt.
+pub struct Keywords<'py>(Bound<'py, PyDict>);
+
+impl<'py> Keywords<'py> {
+    /// The keywords given (none when `None`), copied so that taking them leaves the caller's dict.
+    pub fn new(py: Python<'py>, given: Option<&Bound<'py, PyDict>>) -> PyResult<Self> {
+        Ok(Keywords(match given {
+            Some(d) => d.copy()?,
+            None => PyDict::new(py),
+        }))
+    }
+
+    /// The value of `key` when given and not `None`.
+    pub fn take<T: FromPyObject<'py>>(&self, key: &str) -> PyResult<Option<T>> {
+        let Some(value) = self.0.get_item(key)? else {
+            return Ok(None);
+        };
+        self.0.del_item(key)?;
+        if value.is_none() {
+            return Ok(None);
+        }
+        value
+            .extract()
+            .map(Some)
+            .map_err(|e| PyTypeError::new_err(format!("option {key}: {}", e.value(value.py()))))
+    }
+
+    /// A path option (`str` or `os.PathLike`).
+    pub fn path(&self, key: &str) -> PyResult<Option<PathBuf>> {
+        self.take(key)
+    }
+
+    /// Fails naming the keywords nobody took.
+    pub fn finish(self) -> PyResult<()> {
+        let left: Vec<String> = self.0.keys().iter().map(|k| k.to_string()).collect();
+        if left.is_empty() {
+            return Ok(());
+        }
+        Err(PyTypeError::new_err(format!(
+            "unexpected option(s): {}",
+            left.join(", ")
+        )))
+    }
+
+    /// The classical matcher's settings: `method` and the keywords `p1`, `p2`, `four_paths`,
+    /// `lr_tolerance`, `p2_adaptive`, `census` ("WxH"), `uniqueness`, `speckle`,
+    /// `speckle_diff`; absent ones keep the command line's defaults.
+    pub fn classical(&self, method: &str) -> PyResult<ClassicalFlags> {
+        let d = ClassicalFlags::default();
+        let census = match self.take::<String>("census")? {
+            Some(c) => flags::census_window(&c).map_err(value_error)?,
+            None => d.census,
+        };
+        Ok(ClassicalFlags {
+            method: flags::method(method).map_err(exception)?,
+            p1: self.take("p1")?.unwrap_or(d.p1),
+            p2: self.take("p2")?.unwrap_or(d.p2),
+            four_paths: self.take("four_paths")?.unwrap_or(d.four_paths),
+            lr_tolerance: self.take("lr_tolerance")?.unwrap_or(d.lr_tolerance),
+            p2_adaptive: self.take("p2_adaptive")?.unwrap_or(d.p2_adaptive),
+            census,
+            uniqueness: self.take("uniqueness")?.unwrap_or(d.uniqueness),
+            speckle: self.take("speckle")?.unwrap_or(d.speckle),
+            speckle_diff: self.take("speckle_diff")?.unwrap_or(d.speckle_diff),
+        })
+    }
+}

@@ -1,0 +1,92 @@
+//! `reconstruct`: from a raw pair to a DSM GeoTIFF, tile by tile, with every option of the
+//! command line's `reconstruct` under its name (underscores for dashes) and its defaults.
+
+use std::path::PathBuf;
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use seasonstereo::{flags, ReconstructOptions, Roi, Shard};
+
+use crate::errors::{compute, exception, value_error};
+use crate::keywords::Keywords;
+use crate::progress::Callback;
+use crate::values::{reconstruct_summary, to_python};
+
+/// Reconstructs the DSM of the raw pair `left`, `right` into `out`; returns a dict with the
+/// tiles, the DSM's grid (`transform`, `crs`) and coverage, the scores (with `truth`), each
+/// step's time in seconds and the warnings (failed tiles, suspect cameras).
+#[pyfunction]
+#[pyo3(signature = (left, right, *, out, method="mgm", progress=None, **options))]
+pub fn reconstruct(
+    py: Python<'_>,
+    left: PathBuf,
+    right: PathBuf,
+    out: PathBuf,
+    method: &str,
+    progress: Option<Py<PyAny>>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PyObject> {
+    let keywords = Keywords::new(py, options)?;
+    let options = reconstruct_options(&keywords, method, [left, right], out)?;
+    keywords.finish()?;
+    let callback = Callback::new(progress);
+    let result = compute(py, || seasonstereo::reconstruct(&options, &callback));
+    to_python(
+        py,
+        &reconstruct_summary(&callback.finish(result)?, &options)?,
+    )
+}
+
+/// The library's options: its defaults (those of the command line), then the keywords given.
+fn reconstruct_options(
+    k: &Keywords<'_>,
+    method: &str,
+    [left, right]: [PathBuf; 2],
+    out: PathBuf,
+) -> PyResult<ReconstructOptions> {
+    let matcher = k.classical(method)?.matcher().map_err(exception)?;
+    let resolution = k.take("resolution")?.unwrap_or(flags::RESOLUTION);
+    let grid = flags::grid(k.path("like")?, resolution, None, k.take("epsg")?);
+    let mut o = ReconstructOptions::new(left, right, matcher, grid, out);
+    o.rpc_left = k.path("rpc_left")?;
+    o.rpc_right = k.path("rpc_right")?;
+    o.roi = k
+        .take::<[usize; 4]>("roi")?
+        .map(|[x, y, w, h]| Roi::new(x, y, w, h));
+    o.roi_lonlat = k.take("roi_lonlat")?;
+    o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
+    o.work_dir = k.path("work")?;
+    o.truth = k.path("truth")?;
+    dsm_keywords(k, &mut o)?;
+    tiling_keywords(k, &mut o)?;
+    Ok(o)
+}
+
+/// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none).
+fn dsm_keywords(k: &Keywords<'_>, o: &mut ReconstructOptions) -> PyResult<()> {
+    if let Some(g) = k.take::<String>("gridding")? {
+        o.gridding = flags::gridding(&g).map_err(exception)?;
+    }
+    if let Some(cells) = k.take("fill_holes")? {
+        o.fill_holes = flags::fill_cells(cells);
+    }
+    if let Some(cells) = k.take("median_filter")? {
+        o.median_filter = flags::median_cells(cells);
+    }
+    Ok(())
+}
+
+/// `tile`, `collar` (pixels), `max_memory` (GiB), `shard` ("I/N"), `merge`, `keep_intermediates`.
+fn tiling_keywords(k: &Keywords<'_>, o: &mut ReconstructOptions) -> PyResult<()> {
+    o.tile = k.take("tile")?.unwrap_or(o.tile);
+    o.collar = k.take("collar")?.unwrap_or(o.collar);
+    if let Some(gib) = k.take("max_memory")? {
+        o.max_memory = flags::memory_bytes(gib).map_err(exception)?;
+    }
+    if let Some(shard) = k.take::<String>("shard")? {
+        o.shard = shard.parse::<Shard>().map_err(value_error)?;
+    }
+    o.merge_only = k.take("merge")?.unwrap_or(false);
+    o.keep_intermediates = k.take("keep_intermediates")?.unwrap_or(false);
+    Ok(())
+}

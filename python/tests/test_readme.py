@@ -1,0 +1,30 @@
+"""The README's Python example runs as written (the data root and the output folder replaced by
+the tests' own, the figure drawn off screen)."""
+
+import os
+import re
+
+import numpy as np
+import pytest
+
+from conftest import REPOSITORY
+
+
+def example() -> str:
+    readme = (REPOSITORY / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+    assert len(blocks) == 1, "the README has one Python example"
+    return blocks[0]
+
+
+def test_the_readme_example_draws_the_dsm(dev, tmp_path, monkeypatch):
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    code = example()
+    assert len(code.strip().splitlines()) <= 12
+    code = code.replace('"../shared/data/dfc2019-jax068-dev"', repr(str(dev)))
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert os.path.isfile(tmp_path / "out/py/006-020.tif")
+    assert np.isfinite(scope["dsm"].array).mean() > 0.8

@@ -1,0 +1,32 @@
+"""``reconstruct`` from Python writes the command line's DSM byte for byte, with its scores."""
+
+import filecmp
+
+import pytest
+
+import seasonstereo
+from conftest import images, run_cli
+
+# Scores of the dev pair's DSM (defaults: MGM, median gridding, holes filled, median filter)
+# against the LiDAR truth.
+SCORES = {"mae_filtered": 1.44764, "coverage": 0.91180}
+
+
+def test_reconstruct_writes_the_command_line_s_dsm(dev, cli, tmp_path):
+    left, right, rpc_left, rpc_right = images(dev)
+    truth = dev / "truth" / "JAX_068_DSM.tif"
+    said = run_cli(cli, "reconstruct", left, right, "--rpc-left", rpc_left, "--rpc-right", rpc_right,
+            "--like", truth, "--truth", truth, "-o", tmp_path / "cli.tif")
+    calls = []
+    s = seasonstereo.reconstruct(left, right, rpc_left=rpc_left, rpc_right=rpc_right,
+                                 like=truth, truth=truth, out=tmp_path / "py.tif",
+                                 progress=lambda *c: calls.append(c))
+    assert filecmp.cmp(tmp_path / "cli.tif", tmp_path / "py.tif", shallow=False)
+    assert s["output"] == str(tmp_path / "py.tif") and s["tiles"]["failed"] == []
+    assert s["warnings"] == []
+    assert s["dsm"]["crs"] == "EPSG:32617" and s["dsm"]["width"] == 512
+    assert set(s["seconds"]) == {"tiles", "merge"} and calls
+    assert f"MAE filtered {s['scores']['mae_filtered']:.3f} m" in said
+    for key, value in SCORES.items():
+        assert s["scores"][key] == pytest.approx(value, abs=1e-5), key
+
