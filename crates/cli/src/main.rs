@@ -16,6 +16,7 @@ mod demo;
 mod dsm;
 mod eval;
 mod exit;
+mod jobs;
 mod masks;
 mod predict;
 mod reconstruct;
@@ -106,6 +107,9 @@ enum Command {
     /// (tiny, a-lidar, b-disp, c-photo, d-full, s1, s2, s3); checkpoints, exact --resume, Ctrl-C
     /// saves and exits.
     Train(train::TrainArgs),
+    /// Cluster jobs: `jobs slurm reconstruct <reconstruct arguments>` submits a scene as a
+    /// Slurm array of tile tasks plus a merge; `jobs status` and `jobs resubmit` follow it up.
+    Jobs(jobs::JobsArgs),
 }
 
 /// `mi_option_purge_delay` of mimalloc's `mi_option_e` (`mimalloc.h`).
@@ -150,6 +154,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Train(a) => train::run(a),
         Command::Demo(a) => demo::run(a, &progress),
         Command::Eval(a) => eval::run(a, &progress),
+        Command::Jobs(a) => jobs::run(a),
     }
 }
 

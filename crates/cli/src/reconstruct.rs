@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::Args;
+use dataset::Shard;
 use seasonstereo::{
     reconstruct, DsmSummary, GridChoice, Progress, ReconstructOptions, ReconstructSummary,
     TileStatus,
@@ -62,9 +63,13 @@ pub struct ReconstructArgs {
     #[command(flatten)]
     shard: ShardArg,
     /// Only assemble the DSM from the tiles in --work (after sharded runs); fails naming the
-    /// missing tiles.
+    /// missing tiles, and (exit code 3) the failed ones unless --allow-partial.
     #[arg(long)]
     merge: bool,
+    /// Run this shard's tiles and stop, never assembling the DSM (cluster jobs, whose merge is
+    /// a task of its own); exit code 2 when some of them failed.
+    #[arg(long, conflicts_with = "merge")]
+    tiles_only: bool,
     /// Keep every tile's rectified pair and disparity in --work (L/, R/, homography/,
     /// disparity/, the layout `seasonstereo eval` reads); off by default, as they take ~30 bytes
     /// per pixel.
@@ -110,12 +115,16 @@ pub struct ReconstructArgs {
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tile, a.collar, a.output.clone());
+    let (tiles_only, shard) = (a.tiles_only, a.shard.shard);
     let cameras = a.camera_names();
     a.guard_output()?;
     let s = reconstruct(&a.options()?, progress)?;
     println!("{}", tiles_line(&s, tile, collar));
     print_warnings(&s, &cameras);
     let Some(dsm) = &s.dsm else {
+        if tiles_only {
+            return failed_tiles(&s, shard);
+        }
         println!(
             "{} tiles belong to other shards and are not finished (first: {}); the DSM is written \
              by the run that finds every tile done, or by `seasonstereo reconstruct ... --merge`",
@@ -128,7 +137,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
-    failed_tiles(&s)
+    failed_tiles(&s, Shard::ALL)
 }
 
 /// The failed tiles, one warning each, and cameras that do not fit their images.
@@ -145,12 +154,12 @@ fn print_warnings(s: &ReconstructSummary, cameras: &[String; 2]) {
     }
 }
 
-/// Exit code 2 when some tiles failed (the DSM holds the others).
-fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
+/// Exit code 2 when some tiles of `shard` failed (the DSM, if written, holds the others).
+fn failed_tiles(s: &ReconstructSummary, shard: Shard) -> Result<()> {
     let failed: Vec<String> = s
         .records
         .iter()
-        .filter(|r| r.status == TileStatus::Failed)
+        .filter(|r| r.status == TileStatus::Failed && shard.contains(r.tile.index))
         .map(|r| r.tile.id.clone())
         .collect();
     if failed.is_empty() {
@@ -166,7 +175,7 @@ fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
 
 impl ReconstructArgs {
     /// The library's options for these flags.
-    fn options(self) -> Result<ReconstructOptions> {
+    pub(crate) fn options(self) -> Result<ReconstructOptions> {
         self.check_truth()?;
         let grid = match &self.like {
             Some(p) => GridChoice::Like(p.clone()),
@@ -198,17 +207,16 @@ impl ReconstructArgs {
             collar: self.collar,
             shard: self.shard.shard,
             merge_only: self.merge,
+            tiles_only: self.tiles_only,
+            complete_only: self.merge && !crate::exit::safety().allow_partial,
             keep_intermediates: self.keep_intermediates,
         })
     }
 
     /// Refuses a DSM path that is an input, or an existing DSM that is not this work folder's
     /// (without --overwrite).
-    fn guard_output(&self) -> Result<()> {
-        let work = self
-            .work
-            .clone()
-            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output));
+    pub(crate) fn guard_output(&self) -> Result<()> {
+        let work = self.work_dir();
         let inputs = [
             Some(&self.left),
             Some(&self.right),
@@ -220,6 +228,13 @@ impl ReconstructArgs {
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
         crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
+    }
+
+    /// The work folder: --work, else beside the output.
+    pub(crate) fn work_dir(&self) -> PathBuf {
+        self.work
+            .clone()
+            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output))
     }
 
     /// How the cameras are named in warnings: the JSON files, or the images' RPC tags.

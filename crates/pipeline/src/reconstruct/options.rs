@@ -51,6 +51,12 @@ pub struct ReconstructOptions {
     pub shard: Shard,
     /// Only assemble the DSM from the tiles' records (after sharded runs).
     pub merge_only: bool,
+    /// Run this shard's tiles and stop: never assemble the DSM (a cluster job's merge step
+    /// does).
+    pub tiles_only: bool,
+    /// Refuse to assemble a DSM while some tiles are failed (exit code 3, naming them), instead
+    /// of writing it from the others (exit code 2).
+    pub complete_only: bool,
     /// Keep every tile's rectified pair and disparity in the work folder (`L/`, `R/`,
     /// `homography/`, `disparity/`, the layout `eval` reads).
     pub keep_intermediates: bool,
@@ -87,6 +93,8 @@ impl ReconstructOptions {
             max_memory: 2 << 30,
             shard: Shard::ALL,
             merge_only: false,
+            tiles_only: false,
+            complete_only: false,
             keep_intermediates: false,
         }
     }
