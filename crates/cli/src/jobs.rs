@@ -44,7 +44,7 @@ enum SlurmCommand {
         --sbatch-args \"-p long --time=04:00:00\" --wait\nThen: seasonstereo jobs status --work \
         dsm_work"
     )]
-    Reconstruct(SlurmReconstructArgs),
+    Reconstruct(Box<SlurmReconstructArgs>),
 }
 
 #[derive(Args)]
@@ -105,7 +105,7 @@ const TASK_OPTIONS: [&str; 3] = ["--shard", "--merge", "--tiles-only"];
 
 pub fn run(a: JobsArgs) -> Result<()> {
     match a.command {
-        JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(r),
+        JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(*r),
         JobsCommand::Status(w) => print_status(&job_status(&w.work)?),
         JobsCommand::Resubmit(r) => {
             let s = resubmit_slurm(&r.work.work, r.wait)?;
@@ -223,12 +223,7 @@ fn print_status(s: &JobStatus) -> Result<()> {
         s.missing.len(),
         r.array_size
     );
-    for (id, task, error) in &s.failed {
-        println!("failed  {id} (task {task}): {error}");
-    }
-    for (id, task) in &s.missing {
-        println!("missing {id} (task {task})");
-    }
+    print_tiles(s);
     if s.complete() {
         println!(
             "every tile is finished; the DSM is the merge's ({})",
@@ -236,6 +231,22 @@ fn print_status(s: &JobStatus) -> Result<()> {
         );
         return Ok(());
     }
+    incomplete(s)
+}
+
+/// One line per failed (with its error) and missing tile.
+fn print_tiles(s: &JobStatus) {
+    for (id, task, error) in &s.failed {
+        println!("failed  {id} (task {task}): {error}");
+    }
+    for (id, task) in &s.missing {
+        println!("missing {id} (task {task})");
+    }
+}
+
+/// The command that resubmits the failed and missing tiles' tasks, and exit code 2 naming them.
+fn incomplete(s: &JobStatus) -> Result<()> {
+    let r = &s.record;
     println!(
         "resubmit only these (array tasks {}): seasonstereo jobs resubmit --work {}",
         s.rerun_array(),

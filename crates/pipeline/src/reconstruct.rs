@@ -153,6 +153,9 @@ pub struct ScenePlan {
     pub work: PathBuf,
     /// `<left stem>-<right stem>`.
     pub stem: String,
+    /// The region of the left raw image and the scene's altitudes, metres.
+    pub roi: Roi,
+    pub alt_range: (f64, f64),
     /// The tiles, in plan order.
     pub tiles: Vec<Tile>,
     pub grid: DsmGrid,
@@ -167,7 +170,7 @@ pub struct ScenePlan {
 /// The plan of a reconstruction: the inputs and outputs checked, the tiles cut, the grid chosen
 /// and every tile's memory estimated; nothing is written.
 pub fn plan(opts: &ReconstructOptions) -> Result<ScenePlan> {
-    let (pair, _, mut plan) = prepare(opts)?;
+    let (pair, mut plan) = prepare(opts)?;
     let scene = pair.scene(
         opts,
         &plan.grid,
@@ -182,7 +185,7 @@ pub fn plan(opts: &ReconstructOptions) -> Result<ScenePlan> {
 }
 
 /// The checks and choices before any work: outputs, inputs, region, tiles, grid, merge memory.
-fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, (Roi, (f64, f64)), ScenePlan)> {
+fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, ScenePlan)> {
     check_tile_side(opts.tile)?;
     let work = opts
         .work_dir
@@ -196,17 +199,18 @@ fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, (Roi, (f64, f64)), Sc
     let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
     let grid = scene_grid(&opts.grid, &pair.rpc_left, roi, pair.alt_range)?;
     let merge_memory = merge_memory(&grid, opts.max_memory)?;
-    let alt_range = pair.alt_range;
     let plan = ScenePlan {
         work,
         stem,
+        roi,
+        alt_range: pair.alt_range,
         tiles,
         grid,
         merge_memory,
         tile_memory: 0,
         process_memory: PROCESS_BYTES,
     };
-    Ok((pair, (roi, alt_range), plan))
+    Ok((pair, plan))
 }
 
 /// Runs the tiles (rectify → match → triangulate → grid), then merges them into the DSM (→
@@ -215,10 +219,12 @@ pub fn reconstruct(
     opts: &ReconstructOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
-    let (pair, (roi, alt_range), plan) = prepare(opts)?;
+    let (pair, plan) = prepare(opts)?;
     let ScenePlan {
         work,
         stem,
+        roi,
+        alt_range,
         tiles,
         grid,
         merge_memory,
