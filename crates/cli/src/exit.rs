@@ -33,7 +33,7 @@ pub fn set(safety: Safety) {
     let _ = SAFETY.set(safety);
 }
 
-fn safety() -> Safety {
+pub fn safety() -> Safety {
     SAFETY.get().copied().unwrap_or_default()
 }
 

@@ -17,6 +17,7 @@ mod demo;
 mod dsm;
 mod eval;
 mod exit;
+mod jobs;
 mod masks;
 mod predict;
 mod reconstruct;
@@ -113,6 +114,9 @@ enum Command {
     /// (tiny, a-lidar, b-disp, c-photo, d-full, s1, s2, s3); checkpoints, exact --resume, Ctrl-C
     /// saves and exits.
     Train(train::TrainArgs),
+    /// Cluster jobs: `jobs slurm reconstruct <reconstruct arguments>` submits a scene as a
+    /// Slurm array of tile tasks plus a merge; `jobs status` and `jobs resubmit` follow it up.
+    Jobs(jobs::JobsArgs),
 }
 
 fn main() -> ExitCode {
@@ -148,6 +152,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Train(a) => train::run(a),
         Command::Demo(a) => demo::run(a, &progress),
         Command::Eval(a) => eval::run(a, &progress),
+        Command::Jobs(a) => jobs::run(a),
     }
 }
 

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
+use dataset::Shard;
 use seasonstereo::{
     reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, TileStatus,
 };
@@ -55,9 +56,13 @@ pub struct ReconstructArgs {
     #[command(flatten)]
     shard: ShardArg,
     /// Only assemble the DSM from the tiles in --work (after sharded runs); fails naming the
-    /// missing tiles.
+    /// missing tiles, and (exit code 3) the failed ones unless --allow-partial.
     #[arg(long)]
     merge: bool,
+    /// Run this shard's tiles and stop, never assembling the DSM (cluster jobs, whose merge is
+    /// a task of its own); exit code 2 when some of them failed.
+    #[arg(long, conflicts_with = "merge")]
+    tiles_only: bool,
     /// Keep every tile's rectified pair and disparity in --work (L/, R/, homography/,
     /// disparity/, the layout `seasonstereo eval` reads); off by default, as they take ~30 bytes
     /// per pixel.
@@ -96,6 +101,7 @@ pub struct ReconstructArgs {
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tiling.tile, a.tiling.collar, a.output.clone());
+    let (tiles_only, shard) = (a.tiles_only, a.shard.shard);
     a.guard_output()?;
     let options = a.options()?;
     let s = reconstruct(&options, progress)?;
@@ -104,6 +110,9 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
         eprintln!("warning: {w}");
     }
     let Some(dsm) = &s.dsm else {
+        if tiles_only {
+            return failed_tiles(&s, shard);
+        }
         println!(
             "{} tiles belong to other shards and are not finished (first: {}); the DSM is written \
              by the run that finds every tile done, or by `seasonstereo reconstruct ... --merge`",
@@ -116,15 +125,15 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
-    failed_tiles(&s)
+    failed_tiles(&s, Shard::ALL)
 }
 
-/// Exit code 2 when some tiles failed (the DSM holds the others).
-fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
+/// Exit code 2 when some tiles of `shard` failed (the DSM, if written, holds the others).
+fn failed_tiles(s: &ReconstructSummary, shard: Shard) -> Result<()> {
     let failed: Vec<String> = s
         .records
         .iter()
-        .filter(|r| r.status == TileStatus::Failed)
+        .filter(|r| r.status == TileStatus::Failed && shard.contains(r.tile.index))
         .map(|r| r.tile.id.clone())
         .collect();
     if failed.is_empty() {
@@ -140,7 +149,7 @@ fn failed_tiles(s: &ReconstructSummary) -> Result<()> {
 
 impl ReconstructArgs {
     /// The library's options for these flags.
-    fn options(self) -> Result<ReconstructOptions> {
+    pub(crate) fn options(self) -> Result<ReconstructOptions> {
         Ok(ReconstructOptions {
             matcher: self.matcher.matcher()?,
             max_memory: self.tiling.max_memory_bytes()?,
@@ -163,17 +172,16 @@ impl ReconstructArgs {
             collar: self.tiling.collar,
             shard: self.shard.shard,
             merge_only: self.merge,
+            tiles_only: self.tiles_only,
+            complete_only: self.merge && !crate::exit::safety().allow_partial,
             keep_intermediates: self.keep_intermediates,
         })
     }
 
     /// Refuses a DSM path that is an input, or an existing DSM that is not this work folder's
     /// (without --overwrite).
-    fn guard_output(&self) -> Result<()> {
-        let work = self
-            .work
-            .clone()
-            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output));
+    pub(crate) fn guard_output(&self) -> Result<()> {
+        let work = self.work_dir();
         let inputs = [
             Some(&self.left),
             Some(&self.right),
@@ -185,6 +193,13 @@ impl ReconstructArgs {
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
         crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
+    }
+
+    /// The work folder: --work, else beside the output.
+    pub(crate) fn work_dir(&self) -> PathBuf {
+        self.work
+            .clone()
+            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output))
     }
 }
 

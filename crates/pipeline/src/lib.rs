@@ -13,6 +13,7 @@ pub mod demo;
 pub mod dsm;
 pub mod eval;
 pub mod flags;
+pub mod jobs;
 pub mod matcher;
 pub mod metrics;
 pub mod outputs;

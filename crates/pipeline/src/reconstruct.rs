@@ -192,12 +192,47 @@ struct SceneSettings {
     border: usize,
 }
 
-/// Runs the tiles (rectify → match → triangulate → grid), then merges them into the DSM (→
-/// score).
-pub fn reconstruct(
-    opts: &ReconstructOptions,
-    progress: &dyn Progress,
-) -> Result<ReconstructSummary> {
+/// What a run of these options will do, known before any tile runs: the tiles, the DSM grid and
+/// the memory each step needs. Cluster jobs size their arrays and requests from it.
+#[derive(Clone, Debug)]
+pub struct ScenePlan {
+    /// The work folder (the tiles' records and cells).
+    pub work: PathBuf,
+    /// `<left stem>-<right stem>`.
+    pub stem: String,
+    /// The region of the left raw image and the scene's altitudes, metres.
+    pub roi: Roi,
+    pub alt_range: (f64, f64),
+    /// The tiles, in plan order.
+    pub tiles: Vec<Tile>,
+    pub grid: DsmGrid,
+    /// Memory the assembly of the DSM needs, bytes.
+    pub merge_memory: u64,
+    /// The largest tile's estimated peak memory, bytes (0 until estimated, see [`plan`]).
+    pub tile_memory: u64,
+    /// Held by a process besides its tiles, bytes.
+    pub process_memory: u64,
+}
+
+/// The plan of a reconstruction: the inputs and outputs checked, the tiles cut, the grid chosen
+/// and every tile's memory estimated; nothing is written.
+pub fn plan(opts: &ReconstructOptions) -> Result<ScenePlan> {
+    let (pair, mut plan) = prepare(opts)?;
+    let scene = pair.scene(
+        opts,
+        &plan.grid,
+        &plan.work,
+        &plan.stem,
+        plan.tiles.len() == 1,
+    );
+    let all: Vec<&Tile> = plan.tiles.iter().collect();
+    let (rects, memory) = estimate_tiles(&scene, &all);
+    plan.tile_memory = check_tile_memory(opts, &rects, &memory)?;
+    Ok(plan)
+}
+
+/// The checks and choices before any work: outputs, inputs, region, tiles, grid, merge memory.
+fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, ScenePlan)> {
     opts.check_truth()?;
     check_tile_side(opts.tile)?;
     let work = opts
@@ -212,7 +247,38 @@ pub fn reconstruct(
     let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
     let grid = scene_grid(&opts.grid, &pair.rpc_left, roi, pair.alt_range)?;
     let merge_memory = merge_memory(&grid, opts.max_memory)?;
-    claim_work_folder(&work, &scene_settings(opts, roi, pair.alt_range, &grid))?;
+    let plan = ScenePlan {
+        work,
+        stem,
+        roi,
+        alt_range: pair.alt_range,
+        tiles,
+        grid,
+        merge_memory,
+        tile_memory: 0,
+        process_memory: PROCESS_BYTES,
+    };
+    Ok((pair, plan))
+}
+
+/// Runs the tiles (rectify → match → triangulate → grid), then merges them into the DSM (→
+/// score).
+pub fn reconstruct(
+    opts: &ReconstructOptions,
+    progress: &dyn Progress,
+) -> Result<ReconstructSummary> {
+    let (pair, plan) = prepare(opts)?;
+    let ScenePlan {
+        work,
+        stem,
+        roi,
+        alt_range,
+        tiles,
+        grid,
+        merge_memory,
+        ..
+    } = plan;
+    claim_work_folder(&work, &scene_settings(opts, roi, alt_range, &grid))?;
     let folder = TileFolder::new(&work);
     let mut seconds = Vec::new();
     let run = if opts.merge_only {
@@ -248,6 +314,9 @@ pub fn reconstruct(
         scores: None,
         seconds,
     };
+    if opts.tiles_only {
+        return Ok(summary);
+    }
     if !summary.missing.is_empty() {
         if opts.merge_only {
             bail!(
@@ -262,6 +331,9 @@ pub fn reconstruct(
     }
     if summary.count(TileStatus::Done) == 0 {
         return Err(sanity::nothing_produced(&summary.records).into());
+    }
+    if opts.complete_only {
+        sanity::check_complete(&summary.records, &work)?;
     }
     let t = Instant::now();
     summary.dsm = Some(merge_tiles(opts, &grid, &folder, &summary.records)?);
@@ -451,19 +523,7 @@ fn run_tiles(
     if let Matcher::Network(n) = &opts.matcher {
         n.limit_memory(opts.max_memory.saturating_sub(2 * PROCESS_BYTES));
     }
-    let rects: Vec<Result<Rectification>> = todo
-        .par_iter()
-        .map(|t| tile_rectification(scene, t))
-        .collect();
-    let bands = scene.left.bands().max(1);
-    let memory: Vec<u64> = todo
-        .iter()
-        .zip(&rects)
-        .map(|(t, r)| {
-            r.as_ref()
-                .map_or(0, |r| tile_memory(r, t, bands, scene.matcher))
-        })
-        .collect();
+    let (rects, memory) = estimate_tiles(scene, &todo);
     let largest = check_tile_memory(opts, &rects, &memory)?;
     let in_flight = tiles_at_once(scene.matcher, opts.max_memory, largest, todo.len());
     progress.begin(&format!("tiles ({in_flight} at once)"), todo.len());
@@ -491,6 +551,25 @@ fn run_tiles(
         in_flight,
         largest,
     })
+}
+
+/// Every tile's rectification and estimated peak memory (0 for a tile whose rectification
+/// failed: it fails when run).
+fn estimate_tiles(scene: &Scene, tiles: &[&Tile]) -> (Vec<Result<Rectification>>, Vec<u64>) {
+    let rects: Vec<Result<Rectification>> = tiles
+        .par_iter()
+        .map(|t| tile_rectification(scene, t))
+        .collect();
+    let bands = scene.left.bands().max(1);
+    let memory: Vec<u64> = tiles
+        .iter()
+        .zip(&rects)
+        .map(|(t, r)| {
+            r.as_ref()
+                .map_or(0, |r| tile_memory(r, t, bands, scene.matcher))
+        })
+        .collect();
+    (rects, memory)
 }
 
 /// The largest tile's estimated memory, refused when even that one tile does not fit in the

@@ -55,6 +55,7 @@ pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
 pub use pipeline::eval::metrics::DsmScores;
 pub use pipeline::eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
+pub use pipeline::jobs::{JobStatus, Resources, SlurmRequest, Submitted};
 #[cfg(feature = "network")]
 pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
@@ -65,13 +66,40 @@ pub use pipeline::reconstruct::many::{
 };
 pub use pipeline::reconstruct::select::{PairChoice, PairTerms, View};
 pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};
-pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary};
+pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary, ScenePlan};
 pub use pipeline::rectify::{RectifyOptions, RectifySummary};
 pub use pipeline::score::truth_zone;
 pub use pipeline::{flags, Progress, Silent};
 pub use raster::Image;
 
 pub mod stages;
+
+/// The plan of a reconstruction without running it: the tiles, the DSM grid, every tile's
+/// estimated memory and the merge's. Nothing is written.
+pub fn plan_reconstruct(options: &ReconstructOptions) -> Result<ScenePlan> {
+    pipeline::reconstruct::plan(options)
+}
+
+/// Submits a reconstruction to Slurm: an array of tile tasks sized by the plan and a merge that
+/// runs after them (`afterany`), refusing to write a DSM while tiles are failed. The job scripts
+/// and `jobs/slurm.json` go into the work folder.
+pub fn submit_slurm_reconstruct(
+    options: &ReconstructOptions,
+    request: &SlurmRequest,
+) -> Result<Submitted> {
+    pipeline::jobs::submit_reconstruct(options, request)
+}
+
+/// The tiles of the submission in `work`: done, failed (with their errors), missing.
+pub fn job_status(work: &Path) -> Result<JobStatus> {
+    pipeline::jobs::status(work)
+}
+
+/// Submits again only the array tasks of `work` whose tiles failed or are missing, and a merge
+/// after them; with `wait`, until the merge ends.
+pub fn resubmit_slurm(work: &Path, wait: bool) -> Result<Submitted> {
+    pipeline::jobs::resubmit(work, wait)
+}
 
 /// Rectifies a raw satellite pair from its RPC cameras (epipolar lines become rows) into the
 /// pair folder `options.out_dir` (`L/`, `R/`, `homography/`, `rectify/`), and gives the disparity

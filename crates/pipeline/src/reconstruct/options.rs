@@ -58,6 +58,12 @@ pub struct ReconstructOptions {
     pub shard: Shard,
     /// Only assemble the DSM from the tiles' records (after sharded runs).
     pub merge_only: bool,
+    /// Run this shard's tiles and stop: never assemble the DSM (a cluster job's merge step
+    /// does).
+    pub tiles_only: bool,
+    /// Refuse to assemble a DSM while some tiles are failed (exit code 3, naming them), instead
+    /// of writing it from the others (exit code 2).
+    pub complete_only: bool,
     /// Keep every tile's rectified pair and disparity in the work folder (`L/`, `R/`,
     /// `homography/`, `disparity/`, the layout `eval` reads).
     pub keep_intermediates: bool,
@@ -94,6 +100,8 @@ impl ReconstructOptions {
             max_memory: (DEFAULT_MEMORY_GIB * (1u64 << 30) as f64) as u64,
             shard: Shard::ALL,
             merge_only: false,
+            tiles_only: false,
+            complete_only: false,
             keep_intermediates: false,
         }
     }

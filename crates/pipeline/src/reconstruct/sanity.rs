@@ -196,3 +196,31 @@ pub fn nothing_produced(records: &[super::tile::TileRecord]) -> crate::outputs::
         ),
     }
 }
+
+/// Refuses to assemble a DSM while tiles are failed (a cluster job's merge without
+/// `--allow-partial`): exit code 3, naming them and the way to rerun only them.
+pub fn check_complete(
+    records: &[super::tile::TileRecord],
+    work: &std::path::Path,
+) -> Result<(), crate::outputs::Incomplete> {
+    use super::tile::TileStatus;
+    let failed: Vec<String> = records
+        .iter()
+        .filter(|r| r.status == TileStatus::Failed)
+        .map(|r| r.tile.id.clone())
+        .collect();
+    if failed.is_empty() {
+        return Ok(());
+    }
+    Err(crate::outputs::Incomplete::Nothing {
+        message: format!(
+            "no DSM written: {} of {} tiles failed ({}): see `seasonstereo jobs status --work \
+             {}` for their errors and the command that reruns only them, or merge without them \
+             with --allow-partial",
+            failed.len(),
+            records.len(),
+            crate::outputs::first_names(&failed),
+            crate::jobs::script::quote(&work.display().to_string())
+        ),
+    })
+}

@@ -1,0 +1,271 @@
+//! `seasonstereo jobs`: a reconstruction submitted to a Slurm cluster, its tiles' state, and its
+//! failed tiles submitted again. The arguments map onto the library's `SlurmRequest`; the plan,
+//! the scripts and the submission live in the library.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use pipeline::jobs::script::{quote, split};
+use pipeline::outputs::Incomplete;
+use seasonstereo::{
+    job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted,
+};
+
+use crate::reconstruct::ReconstructArgs;
+
+#[derive(Args)]
+pub struct JobsArgs {
+    #[command(subcommand)]
+    command: JobsCommand,
+}
+
+#[derive(Subcommand)]
+enum JobsCommand {
+    /// Submit a command to Slurm (sbatch): `jobs slurm reconstruct <reconstruct arguments>`.
+    #[command(subcommand)]
+    Slurm(SlurmCommand),
+    /// The tiles of a submission: done, failed (with their errors) and missing, and the command
+    /// that resubmits only the failed ones. Exit code 2 while some are failed or missing.
+    Status(WorkArg),
+    /// Submit again only the array tasks whose tiles failed or are missing, then the merge.
+    Resubmit(ResubmitArgs),
+}
+
+#[derive(Subcommand)]
+enum SlurmCommand {
+    /// Plan the tiles, write the job scripts into the work folder (every argument quoted) and
+    /// submit an array of tile tasks sized to the plan plus a merge task after them
+    /// (`afterany`), which refuses to write a DSM while tiles are failed (unless
+    /// --allow-partial), naming them. Every `reconstruct` option is passed through as typed.
+    #[command(
+        after_help = "Example:\n  seasonstereo jobs slurm reconstruct left.tif \
+        right.tif --rpc-left l.json --rpc-right r.json -o dsm.tif --max-memory 6 \\\n    \
+        --sbatch-args \"-p long --time=04:00:00\" --wait\nThen: seasonstereo jobs status --work \
+        dsm_work"
+    )]
+    Reconstruct(Box<SlurmReconstructArgs>),
+}
+
+#[derive(Args)]
+pub struct SlurmReconstructArgs {
+    #[command(flatten)]
+    job: JobOptions,
+    #[command(flatten)]
+    reconstruct: ReconstructArgs,
+}
+
+/// The job's own options, read anywhere on the line and not passed to `reconstruct`.
+#[derive(Args)]
+struct JobOptions {
+    /// More sbatch options as one string (partition, account, time limit, GPUs), e.g.
+    /// "-p long --time=04:00:00 --gres=gpu:1"; they come after ours, so they win.
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    sbatch_args: Option<String>,
+    /// Tiles per array task (the array has ceil(tiles / N) tasks). Default: the CPUs of a task.
+    #[arg(long, value_name = "N")]
+    tiles_per_task: Option<usize>,
+    /// CPUs of a tile task. Default: as many tiles as fit in --max-memory at once, at most the
+    /// largest node's CPUs (sinfo).
+    #[arg(long, value_name = "N")]
+    cpus_per_task: Option<usize>,
+    /// Block until the merge ends and exit with its exit code.
+    #[arg(long)]
+    wait: bool,
+}
+
+#[derive(Args)]
+pub struct WorkArg {
+    /// The --work folder of the submission.
+    #[arg(long, value_name = "DIR")]
+    work: PathBuf,
+}
+
+#[derive(Args)]
+pub struct ResubmitArgs {
+    #[command(flatten)]
+    work: WorkArg,
+    /// Block until the merge ends and exit with its exit code.
+    #[arg(long)]
+    wait: bool,
+}
+
+/// Options of the job, left out of the arguments passed to `reconstruct`: `(name, takes a value)`.
+const JOB_OPTIONS: [(&str, bool); 6] = [
+    ("--sbatch-args", true),
+    ("--tiles-per-task", true),
+    ("--cpus-per-task", true),
+    ("--wait", false),
+    ("--overwrite", false),
+    ("--allow-partial", false),
+];
+
+/// Options each task sets itself.
+const TASK_OPTIONS: [&str; 3] = ["--shard", "--merge", "--tiles-only"];
+
+pub fn run(a: JobsArgs) -> Result<()> {
+    match a.command {
+        JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(*r),
+        JobsCommand::Status(w) => print_status(&job_status(&w.work)?),
+        JobsCommand::Resubmit(r) => {
+            let s = resubmit_slurm(&r.work.work, r.wait)?;
+            report(&s, &r.work.work)
+        }
+    }
+}
+
+fn slurm_reconstruct(a: SlurmReconstructArgs) -> Result<()> {
+    a.reconstruct.guard_output()?;
+    let safety = crate::exit::safety();
+    let flag = |on: bool, name: &str| if on { vec![name.to_string()] } else { vec![] };
+    let request = SlurmRequest {
+        binary: std::env::current_exe().context("locating the seasonstereo binary")?,
+        args: passthrough(std::env::args().collect())?,
+        merge_flags: flag(safety.allow_partial, "--allow-partial"),
+        task_flags: flag(safety.overwrite, "--overwrite"),
+        cwd: std::env::current_dir().context("reading the current folder")?,
+        sbatch_args: split(a.job.sbatch_args.as_deref().unwrap_or(""))?,
+        tiles_per_task: a.job.tiles_per_task,
+        cpus: a.job.cpus_per_task,
+        wait: a.job.wait,
+    };
+    let work = a.reconstruct.work_dir();
+    let s = submit_slurm_reconstruct(&a.reconstruct.options()?, &request)?;
+    report(&s, &work)
+}
+
+/// The `reconstruct` arguments as typed: the line after `jobs slurm reconstruct`, without the
+/// job's options and the global flags (the scripts add what each task needs).
+fn passthrough(argv: Vec<String>) -> Result<Vec<String>> {
+    let start = argv
+        .iter()
+        .position(|a| a == "reconstruct")
+        .map_or(argv.len(), |i| i + 1);
+    let (mut out, mut words) = (Vec::new(), argv[start..].iter());
+    while let Some(word) = words.next() {
+        let name = word.split('=').next().unwrap_or(word);
+        if TASK_OPTIONS.contains(&name) {
+            bail!("{name} is set by the job itself (tile tasks take shards, the merge task merges): leave it out");
+        }
+        match JOB_OPTIONS.iter().find(|(n, _)| *n == name) {
+            Some((_, true)) if !word.contains('=') => drop(words.next()),
+            Some(_) => {}
+            None => out.push(word.clone()),
+        }
+    }
+    Ok(out)
+}
+
+/// What was submitted; with --wait, the merge's exit code as ours.
+fn report(s: &Submitted, work: &Path) -> Result<()> {
+    let r = &s.record;
+    println!(
+        "submitted {} tiles as array job {} (tasks {}, {} tiles per task) and merge job {} \
+         (afterany); scripts and logs in {}",
+        r.tiles.len(),
+        s.tiles_job,
+        pipeline::jobs::status::array_spec(&s.tasks),
+        r.tiles_per_task,
+        s.merge_job,
+        r.tiles_script.parent().unwrap_or(work).display()
+    );
+    if let Some((t, m)) = s.resources {
+        println!(
+            "resources: tile tasks {} CPUs, {} MiB; merge {} CPUs, {} MiB",
+            t.cpus, t.mem_mib, m.cpus, m.mem_mib
+        );
+    }
+    println!(
+        "follow: seasonstereo jobs status --work {}",
+        quote(&work.display().to_string())
+    );
+    merge_outcome(s.merge_exit, &s.merge_job, work)
+}
+
+/// The merge's exit code (with --wait) as this command's result.
+fn merge_outcome(exit: Option<i32>, job: &str, work: &Path) -> Result<()> {
+    let see = format!(
+        "see `seasonstereo jobs status --work {}` and the log {}",
+        quote(&work.display().to_string()),
+        work.join("jobs/logs")
+            .join(format!("merge-{job}.log"))
+            .display()
+    );
+    match exit {
+        None | Some(0) => Ok(()),
+        Some(2) => Err(Incomplete::Partial {
+            message: format!("merge job {job} wrote a partial DSM (exit code 2): {see}"),
+            failed: Vec::new(),
+        }
+        .into()),
+        Some(3) => Err(Incomplete::Nothing {
+            message: format!("merge job {job} wrote no DSM (exit code 3): {see}"),
+        }
+        .into()),
+        Some(c) => bail!("merge job {job} failed (exit code {c}): {see}"),
+    }
+}
+
+/// Done / failed / missing tiles and the command that resubmits the failed ones; exit code 2
+/// while the DSM cannot be merged.
+fn print_status(s: &JobStatus) -> Result<()> {
+    let r = &s.record;
+    let jobs = r
+        .submissions
+        .last()
+        .map_or("none".into(), |(t, m)| format!("tiles {t}, merge {m}"));
+    println!(
+        "{}: {} tiles: {} done, {} failed, {} missing; array of {} tasks; last jobs: {jobs}",
+        s.work.display(),
+        r.tiles.len(),
+        s.done.len(),
+        s.failed.len(),
+        s.missing.len(),
+        r.array_size
+    );
+    print_tiles(s);
+    if s.complete() {
+        println!(
+            "every tile is finished; the DSM is the merge's ({})",
+            r.merge_script.display()
+        );
+        return Ok(());
+    }
+    incomplete(s)
+}
+
+/// One line per failed (with its error) and missing tile.
+fn print_tiles(s: &JobStatus) {
+    for (id, task, error) in &s.failed {
+        println!("failed  {id} (task {task}): {error}");
+    }
+    for (id, task) in &s.missing {
+        println!("missing {id} (task {task})");
+    }
+}
+
+/// The command that resubmits the failed and missing tiles' tasks, and exit code 2 naming them.
+fn incomplete(s: &JobStatus) -> Result<()> {
+    let r = &s.record;
+    println!(
+        "resubmit only these (array tasks {}): seasonstereo jobs resubmit --work {}",
+        s.rerun_array(),
+        quote(&s.work.display().to_string())
+    );
+    let names: Vec<String> = s
+        .failed
+        .iter()
+        .map(|f| f.0.clone())
+        .chain(s.missing.iter().map(|m| m.0.clone()))
+        .collect();
+    Err(Incomplete::Partial {
+        message: format!(
+            "{} of {} tiles failed or missing ({}): resubmit them as above",
+            names.len(),
+            r.tiles.len(),
+            pipeline::outputs::first_names(&names)
+        ),
+        failed: names,
+    }
+    .into())
+}

@@ -1,0 +1,210 @@
+//! `seasonstereo jobs` against a fake Slurm: `sbatch`, `sinfo` written into a temp folder on
+//! PATH; `sbatch` logs its arguments (one `[word]` each) and runs the job script at once, each
+//! array index in turn, so a submission is a complete run. Checked: arguments and quoting (paths
+//! with spaces, `--sbatch-args`), the array size, the `afterany` merge, the DSM byte-identical to
+//! a local `reconstruct`, a failed tile named by `jobs status` (exit 2) and the merge refusing it
+//! (exit 3), and `jobs resubmit` sending only the failed tasks.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const SBATCH: &str = r#"#!/bin/sh
+log="$FAKE_SLURM_LOG"; n=$(( $(cat "$log.count" 2>/dev/null || echo 0) + 1 )); echo $n > "$log.count"
+printf 'sbatch' >> "$log"; for a in "$@"; do printf ' [%s]' "$a" >> "$log"; done; echo >> "$log"
+array=""; wait=0; for a in "$@"; do case "$a" in --array=*) array=${a#--array=};; --wait) wait=1;; esac; script=$a; done
+rc=0
+if [ -n "$array" ]; then
+  for part in $(echo "$array" | tr ',' ' '); do
+    lo=${part%-*}; hi=${part#*-}; i=$lo
+    while [ $i -le $hi ]; do SLURM_ARRAY_TASK_ID=$i sh "$script" >> "$log.out" 2>&1 || echo "task $i exit $?" >> "$log"; i=$((i+1)); done
+  done
+else
+  sh "$script" >> "$log.out" 2>&1; rc=$?; echo "job $n exit $rc" >> "$log"
+fi
+echo "$n"
+[ $wait = 1 ] && exit $rc; exit 0
+"#;
+
+struct Cluster {
+    bin: PathBuf,
+    log: PathBuf,
+}
+
+impl Cluster {
+    fn new(dir: &Path) -> Cluster {
+        let bin = dir.join("fake slurm");
+        std::fs::create_dir_all(&bin).unwrap();
+        std::fs::write(bin.join("sbatch"), SBATCH).unwrap();
+        std::fs::write(bin.join("sinfo"), "#!/bin/sh\necho 2\n").unwrap();
+        for tool in ["sbatch", "sinfo"] {
+            let p = bin.join(tool);
+            let mut perm = std::fs::metadata(&p).unwrap().permissions();
+            std::os::unix::fs::PermissionsExt::set_mode(&mut perm, 0o755);
+            std::fs::set_permissions(&p, perm).unwrap();
+        }
+        Cluster {
+            log: dir.join("sbatch.log"),
+            bin,
+        }
+    }
+
+    fn run(&self, args: &[&str]) -> Output {
+        let path = format!("{}:{}", self.bin.display(), std::env::var("PATH").unwrap());
+        Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
+            .args(args)
+            .env("PATH", path)
+            .env("FAKE_SLURM_LOG", &self.log)
+            .output()
+            .unwrap()
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// `reconstruct` arguments of the raw world in `root` onto `out`.
+fn scene_args(root: &Path, out: &Path) -> Vec<String> {
+    let p = |s: &str| root.join(s).display().to_string();
+    let mut v = vec![p("raw/WORLD_3_A.tif"), p("raw/WORLD_3_B.tif")];
+    for (flag, value) in [
+        ("--rpc-left", p("rpc/WORLD_3_A.json")),
+        ("--rpc-right", p("rpc/WORLD_3_B.json")),
+    ] {
+        v.extend([flag.to_string(), value]);
+    }
+    v.extend(["--tile", "256", "--median-filter", "5", "-o"].map(String::from));
+    v.push(out.display().to_string());
+    v
+}
+
+/// Overwrites the compressed data of the image's TIFF tile (row 2, col 2): reading a window that
+/// touches it fails.
+fn damage_last_tile(path: &Path) {
+    use tiff::tags::Tag;
+    let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(path).unwrap()).unwrap();
+    let offsets = decoder.get_tag_u64_vec(Tag::TileOffsets).unwrap();
+    let counts = decoder.get_tag_u64_vec(Tag::TileByteCounts).unwrap();
+    let (o, c) = (
+        *offsets.last().unwrap() as usize,
+        *counts.last().unwrap() as usize,
+    );
+    let mut bytes = std::fs::read(path).unwrap();
+    bytes[o..o + c].fill(0xA5);
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn submit(cluster: &Cluster, args: &[String], extra: &[&str]) -> Output {
+    let mut all = vec!["jobs", "slurm", "reconstruct"];
+    all.extend(args.iter().map(String::as_str));
+    all.extend_from_slice(extra);
+    cluster.run(&all)
+}
+
+#[test]
+fn a_submission_gives_the_local_dsm_and_failed_tiles_are_named_and_resubmitted() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = Cluster::new(dir.path());
+    let root = dir.path().join("my world");
+    let o = cluster.run(&[
+        "world",
+        "--size",
+        "768",
+        "--seed",
+        "3",
+        "--raw",
+        "-o",
+        root.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let local = dir.path().join("local.tif");
+    let o = cluster.run(
+        &["reconstruct"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(scene_args(&root, &local))
+            .collect::<Vec<_>>()
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+
+    let out = dir.path().join("out dir/slurm dsm.tif");
+    let extra = [
+        "--tiles-per-task",
+        "2",
+        "--sbatch-args",
+        "-p debug --comment 'a b'",
+        "--wait",
+    ];
+    let o = submit(&cluster, &scene_args(&root, &out), &extra);
+    assert!(o.status.success(), "{}\n{}", text(&o), cluster.log());
+    let log = cluster.log();
+    // 9 tiles, 2 per task: 5 tasks; the user's options after ours, one word each.
+    assert!(log.contains("[--array=0-4]"), "{log}");
+    assert!(log.contains("[--dependency=afterany:1] [--wait]"), "{log}");
+    assert!(log.contains("[-p] [debug] [--comment] [a b]"), "{log}");
+    assert!(log.contains("[--cpus-per-task=2]"), "{log}");
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&local).unwrap());
+    let work = dir.path().join("out dir/slurm dsm_work");
+    let script = std::fs::read_to_string(work.join("jobs/reconstruct-tiles.sh")).unwrap();
+    assert!(
+        script.contains("'-o' ") || script.contains(" -o '"),
+        "{script}"
+    );
+    assert!(script.contains("--median-filter 5"), "{script}");
+    let o = cluster.run(&["jobs", "status", "--work", work.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+
+    // A damaged image: the tiles touching its last TIFF tile fail, the merge refuses (3).
+    let left = root.join("raw/WORLD_3_A.tif");
+    let good = std::fs::read(&left).unwrap();
+    damage_last_tile(&left);
+    let failing = dir.path().join("failing/dsm.tif");
+    let o = submit(
+        &cluster,
+        &scene_args(&root, &failing),
+        &["--tiles-per-task", "1", "--wait"],
+    );
+    assert_eq!(o.status.code(), Some(3), "{}\n{}", text(&o), cluster.log());
+    assert!(!failing.exists());
+    let work = dir.path().join("failing/dsm_work");
+    let o = cluster.run(&["jobs", "status", "--work", work.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(
+        text(&o).contains("failed  r002_c002 (task 8)"),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        text(&o).contains("seasonstereo jobs resubmit --work"),
+        "{}",
+        text(&o)
+    );
+
+    std::fs::write(&left, good).unwrap();
+    let before = cluster.log().len();
+    let o = cluster.run(&[
+        "jobs",
+        "resubmit",
+        "--work",
+        work.to_str().unwrap(),
+        "--wait",
+    ]);
+    assert!(o.status.success(), "{}\n{}", text(&o), cluster.log());
+    let resubmitted = cluster.log()[before..].to_string();
+    assert!(resubmitted.contains("[--array=4,5,7,8]"), "{resubmitted}");
+    assert_eq!(
+        std::fs::read(&failing).unwrap(),
+        std::fs::read(&local).unwrap()
+    );
+}

@@ -1,0 +1,96 @@
+//! What a submitted reconstruction's work folder holds: tiles done, failed (with their errors)
+//! and missing, and the array tasks to run again.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use super::record::SlurmRecord;
+use crate::reconstruct::folder::TileFolder;
+use crate::reconstruct::tile::TileStatus;
+
+/// The tiles of a submission, by state.
+#[derive(Clone, Debug)]
+pub struct JobStatus {
+    pub work: PathBuf,
+    pub record: SlurmRecord,
+    /// Finished tiles (with points, or empty: nothing to match).
+    pub done: Vec<String>,
+    /// Failed tiles: `(id, array task, error)`.
+    pub failed: Vec<(String, usize, String)>,
+    /// Tiles without a record (their task has not run, or was killed): `(id, array task)`.
+    pub missing: Vec<(String, usize)>,
+}
+
+impl JobStatus {
+    /// The array tasks holding a failed or missing tile, in order.
+    pub fn tasks_to_rerun(&self) -> Vec<usize> {
+        let mut tasks: Vec<usize> = self
+            .failed
+            .iter()
+            .map(|f| f.1)
+            .chain(self.missing.iter().map(|m| m.1))
+            .collect();
+        tasks.sort_unstable();
+        tasks.dedup();
+        tasks
+    }
+
+    /// The `--array` value of [`Self::tasks_to_rerun`].
+    pub fn rerun_array(&self) -> String {
+        array_spec(&self.tasks_to_rerun())
+    }
+
+    /// Every tile finished.
+    pub fn complete(&self) -> bool {
+        self.failed.is_empty() && self.missing.is_empty()
+    }
+}
+
+/// The state of the tiles of the submission in `work`, read from the tiles' records.
+pub fn status(work: &Path) -> Result<JobStatus> {
+    let record = SlurmRecord::read(work)?;
+    let folder = TileFolder::new(work);
+    let mut s = JobStatus {
+        work: work.to_path_buf(),
+        record: record.clone(),
+        done: Vec::new(),
+        failed: Vec::new(),
+        missing: Vec::new(),
+    };
+    for tile in &record.tiles {
+        let task = record.task_of(tile.index);
+        match folder.record(tile) {
+            None => s.missing.push((tile.id.clone(), task)),
+            Some(r) if r.status == TileStatus::Failed => s.failed.push((
+                tile.id.clone(),
+                task,
+                r.error.unwrap_or_else(|| "no message".into()),
+            )),
+            Some(_) => s.done.push(tile.id.clone()),
+        }
+    }
+    Ok(s)
+}
+
+/// Slurm's `--array` value for `tasks`: `0-3` for a run, else `1,4,7`.
+pub fn array_spec(tasks: &[usize]) -> String {
+    match (tasks.first(), tasks.last()) {
+        (Some(&a), Some(&b)) if b - a + 1 == tasks.len() && tasks.len() > 1 => format!("{a}-{b}"),
+        _ => tasks
+            .iter()
+            .map(|t| t.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn array_specs() {
+        assert_eq!(super::array_spec(&[0, 1, 2, 3]), "0-3");
+        assert_eq!(super::array_spec(&[2]), "2");
+        assert_eq!(super::array_spec(&[1, 4]), "1,4");
+    }
+}
