@@ -58,6 +58,7 @@ pub use pipeline::eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
 #[cfg(feature = "network")]
 pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
+pub use pipeline::outputs::Incomplete;
 pub use pipeline::reconstruct::fuse::FusionParams;
 pub use pipeline::reconstruct::many::{
     auto_min_support, FusedOutcome, PairOutcome, PairStatus, ReconstructManyOptions,
