@@ -25,7 +25,10 @@ mod values;
 #[pymodule]
 fn _seasonstereo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    m.add("NothingProduced", m.py().get_type::<errors::NothingProduced>())?;
+    m.add(
+        "NothingProduced",
+        m.py().get_type::<errors::NothingProduced>(),
+    )?;
     m.add_function(wrap_pyfunction!(predict::predict, m)?)?;
     m.add_function(wrap_pyfunction!(files::rectify, m)?)?;
     m.add_function(wrap_pyfunction!(files::dsm, m)?)?;

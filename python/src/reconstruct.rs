@@ -71,7 +71,12 @@ fn reconstruct_options(
 /// zone): the command line's `--like`, `--resolution`, `--epsg`.
 pub fn grid(k: &Keywords<'_>) -> PyResult<GridChoice> {
     let resolution = k.take("resolution")?.unwrap_or(flags::RESOLUTION);
-    Ok(flags::grid(k.path("like")?, resolution, None, k.take("epsg")?))
+    Ok(flags::grid(
+        k.path("like")?,
+        resolution,
+        None,
+        k.take("epsg")?,
+    ))
 }
 
 /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none).
