@@ -112,9 +112,7 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
         eprintln!("warning: {w}");
     }
     s.check_produced()?;
-    let Some(f) = &s.fused else {
-        return Ok(());
-    };
+    let Some(f) = &s.fused else { return Ok(()) };
     println!("{}", fused_line(&s, f));
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
