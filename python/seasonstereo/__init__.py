@@ -9,8 +9,11 @@ order (``rasterio.Affine(*dsm.transform)``) and ``crs`` like ``"EPSG:32617"``.
 
 Cameras (``rpc_left``, ``rpc_right``) are a path to the product's SatNeRF/rpcm JSON, a GeoTIFF
 carrying its RPC tag, or an rpcm-format dict (the bare ``rpc`` dictionary or a whole SatNeRF
-JSON). Errors are ``FileNotFoundError`` (naming the file), ``OSError``, ``ValueError`` (bad
-values) or ``TypeError`` (unknown options). Every call releases the GIL while it computes, so
+JSON). Errors are ``FileNotFoundError`` (naming the file), ``FileExistsError`` (an existing
+output without ``overwrite=True``, as the command line's ``--overwrite``), ``OSError``,
+``ValueError`` (bad values), ``TypeError`` (unknown options) or :class:`NothingProduced` (a run
+whose every tile or pair failed: the command line's exit code 3). A partial run (some tiles or
+pairs failed: exit code 2) returns, names them and issues a ``UserWarning``. Every call releases the GIL while it computes, so
 threads run in parallel; ``progress`` takes a callable ``progress(label, done, total)``, or
 ``True`` for tqdm bars when tqdm is installed.
 """
@@ -29,7 +32,10 @@ import numpy as np
 from . import _seasonstereo as _native
 
 __version__: str = _native.__version__
-__all__ = ["Dsm", "predict", "rectify", "dsm", "read_dsm", "score", "reconstruct", "__version__"]
+NothingProduced = _native.NothingProduced
+NothingProduced.__module__ = __name__
+__all__ = ["Dsm", "NothingProduced", "predict", "rectify", "dsm", "read_dsm", "score",
+           "reconstruct", "reconstruct_many", "__version__"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 Camera = Union[PathLike, dict]
@@ -104,7 +110,8 @@ def rectify(left: PathLike, right: PathLike, out: PathLike, *, rpc_left: Optiona
             rpc_right: Optional[Camera] = None, progress: Progress = None,
             **options: Any) -> dict:
     """Rectifies a raw pair from its RPCs into the folder ``out`` (``L/``, ``R/``,
-    ``homography/``, ``rectify/``), as ``seasonstereo rectify``. Options: ``roi`` (x, y, w, h),
+    ``homography/``, ``rectify/``), as ``seasonstereo rectify`` (an ``out`` that is one of the
+    inputs is refused; its files are replaced). Options: ``roi`` (x, y, w, h),
     ``alt_range`` (min, max metres), ``stem``. Returns the paths written and the
     ``disparity_range`` for :func:`predict`."""
     with _cameras(rpc_left, rpc_right) as (l, r, _):
@@ -113,9 +120,10 @@ def rectify(left: PathLike, right: PathLike, out: PathLike, *, rpc_left: Optiona
 
 
 def dsm(disparity: Union[PathLike, np.ndarray], homography: PathLike, rpc_left: Camera,
-        rpc_right: Camera, out: PathLike, **options: Any) -> Dsm:
+        rpc_right: Camera, out: PathLike, *, overwrite: bool = False, **options: Any) -> Dsm:
     """Triangulates the disparity of a rectified pair (a file, or the array :func:`predict`
-    gave) into the DSM GeoTIFF ``out`` and returns it, as ``seasonstereo dsm``. Options:
+    gave) into the DSM GeoTIFF ``out`` and returns it, as ``seasonstereo dsm``; an existing
+    ``out`` raises ``FileExistsError`` unless ``overwrite=True`` (then replaced atomically). Options:
     ``like`` (a DSM whose grid to use, e.g. the truth), ``resolution``, ``bounds``, ``epsg``,
     ``gridding`` ("max" or "median"), ``fill_holes``, ``median_filter``, ``border``."""
     with _cameras(rpc_left, rpc_right) as (l, r, scratch):
@@ -123,7 +131,8 @@ def dsm(disparity: Union[PathLike, np.ndarray], homography: PathLike, rpc_left: 
             path = os.path.join(scratch, "disparity.npy")
             np.save(path, np.ascontiguousarray(disparity, dtype=np.float32))
             disparity = path
-        return Dsm(*_native.dsm(disparity, homography, l, r, out, **options))
+        return Dsm(*_native.dsm(disparity, homography, l, r, out, overwrite=overwrite,
+                                **options))
 
 
 def read_dsm(path: PathLike, utm_zone: Optional[str] = None) -> Dsm:
@@ -142,7 +151,8 @@ def score(dsm: PathLike, truth: PathLike, utm_zone: Optional[str] = None) -> dic
 
 def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
                 rpc_left: Optional[Camera] = None, rpc_right: Optional[Camera] = None,
-                method: str = "mgm", progress: Progress = None, **options: Any) -> dict:
+                method: str = "mgm", overwrite: bool = False, progress: Progress = None,
+                **options: Any) -> dict:
     """From a raw pair to the DSM GeoTIFF ``out``, tile by tile, as ``seasonstereo
     reconstruct`` with the same options and defaults (underscores for dashes): ``like``,
     ``truth``, ``resolution``, ``epsg``, ``gridding``, ``fill_holes``, ``median_filter``,
@@ -150,11 +160,44 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates`` and the matcher's options
     of :func:`predict`. Returns the tiles (``failed`` ones included: the DSM holds the others),
     the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds`` and the
-    ``warnings`` the command prints (also issued as Python warnings)."""
+    ``warnings`` the command prints (also issued as Python warnings).
+
+    An existing ``out`` raises ``FileExistsError`` (the command line's message) unless
+    ``overwrite=True`` or it is the DSM of an earlier run of the same ``work`` folder (resumed).
+    When every tile failed, nothing is written and :class:`NothingProduced` is raised; when only
+    some failed, the call returns with them in ``tiles["failed"]`` and a warning."""
     with _cameras(rpc_left, rpc_right) as (l, r, _):
-        summary = _native.reconstruct(left, right, out=out, method=method,
+        summary = _native.reconstruct(left, right, out=out, method=method, overwrite=overwrite,
                                       progress=_progress(progress),
                                       rpc_left=l, rpc_right=r, **options)
+    for line in summary["warnings"]:
+        warnings.warn(line, stacklevel=2)
+    return summary
+
+
+def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = None, *,
+                     out: PathLike, method: str = "mgm", overwrite: bool = False,
+                     progress: Progress = None, **options: Any) -> dict:
+    """Many dates, one DSM, as ``seasonstereo reconstruct-many``: scores every overlapping pair
+    of ``images`` (two or more; cameras ``<image stem>.json`` in ``rpc_dir``, else the images'
+    RPC tags), reconstructs the best ``pairs`` and fuses them into ``out`` (with
+    ``<out>_count.tif``, ``<out>_spread.tif`` and ``<out>_report.json`` beside it). Options, with
+    the command's defaults: ``pairs``, ``dry_run`` (choose the pairs, write nothing),
+    ``cluster_tolerance``, ``min_support``, ``register``, ``fill_holes``, ``median_filter``,
+    ``pair_median_filter``, ``work``, ``like``, ``resolution``, ``epsg``, ``truth``,
+    ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB) and the matcher's
+    options of :func:`predict`.
+
+    Returns the report's content: ``views``, ``candidates``, ``chosen`` (pairs with their score
+    ``terms``), ``pairs`` (each pair's status, DSM, coverage, scores, seconds), ``fused`` (files,
+    grid with ``transform`` and ``crs``, coverage; None on a dry run), ``scores``, ``seconds``
+    and ``warnings`` (incomplete pairs, also issued as Python warnings). Fewer than two images
+    raise ``ValueError``; existing outputs ``FileExistsError`` unless ``overwrite=True`` (or an
+    earlier run of the same work folder is resumed); no pair producing a DSM
+    :class:`NothingProduced`."""
+    summary = _native.reconstruct_many([os.fspath(i) for i in images], rpc_dir, out=out,
+                                       method=method, overwrite=overwrite,
+                                       progress=_progress(progress), **options)
     for line in summary["warnings"]:
         warnings.warn(line, stacklevel=2)
     return summary

@@ -14,6 +14,9 @@ _Dsm = Tuple[npt.NDArray[np.float32], _Transform, str]
 
 __version__: str
 
+class NothingProduced(RuntimeError):
+    """A run that produced nothing (every tile or pair failed): the command line's exit code 3."""
+
 def predict(
     left: npt.NDArray[Union[np.float32, np.uint8, np.uint16]],
     right: npt.NDArray[Union[np.float32, np.uint8, np.uint16]],
@@ -59,6 +62,7 @@ def dsm(
     fill_holes: int = 0,
     median_filter: int = 0,
     border: int = 0,
+    overwrite: bool = False,
 ) -> _Dsm: ...
 def read_dsm(path: _Path, utm_zone: Optional[str] = None) -> _Dsm: ...
 def score(dsm: _Path, truth: _Path, utm_zone: Optional[str] = None) -> dict[str, Any]: ...
@@ -68,6 +72,7 @@ def reconstruct(
     *,
     out: _Path,
     method: str = "mgm",
+    overwrite: bool = False,
     progress: _Progress = None,
     rpc_left: Optional[_Path] = None,
     rpc_right: Optional[_Path] = None,
@@ -88,5 +93,33 @@ def reconstruct(
     shard: Optional[str] = None,
     merge: Optional[bool] = None,
     keep_intermediates: Optional[bool] = None,
+    **matcher: Any,
+) -> dict[str, Any]: ...
+def reconstruct_many(
+    images: list[_Path],
+    rpc_dir: Optional[_Path] = None,
+    *,
+    out: _Path,
+    method: str = "mgm",
+    overwrite: bool = False,
+    progress: _Progress = None,
+    pairs: Optional[int] = None,
+    dry_run: Optional[bool] = None,
+    cluster_tolerance: Optional[float] = None,
+    min_support: Optional[int] = None,
+    register: Optional[bool] = None,
+    fill_holes: Optional[int] = None,
+    median_filter: Optional[int] = None,
+    pair_median_filter: Optional[int] = None,
+    work: Optional[_Path] = None,
+    like: Optional[_Path] = None,
+    resolution: Optional[float] = None,
+    epsg: Optional[int] = None,
+    truth: Optional[_Path] = None,
+    alt_range: Optional[Tuple[float, float]] = None,
+    gridding: Optional[str] = None,
+    tile: Optional[int] = None,
+    collar: Optional[int] = None,
+    max_memory: Optional[float] = None,
     **matcher: Any,
 ) -> dict[str, Any]: ...

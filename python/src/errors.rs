@@ -5,18 +5,34 @@
 use std::io::ErrorKind;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+use pyo3::create_exception;
 use pyo3::exceptions::{
-    PyFileNotFoundError, PyOSError, PyPermissionError, PyRuntimeError, PyValueError,
+    PyFileExistsError, PyFileNotFoundError, PyOSError, PyPermissionError, PyRuntimeError,
+    PyValueError,
 };
 use pyo3::prelude::*;
+use seasonstereo::Incomplete;
+
+create_exception!(
+    seasonstereo,
+    NothingProduced,
+    PyRuntimeError,
+    "A run that produced nothing: every tile (or pair) failed or was empty, no DSM written (the \
+     command line's exit code 3). The message names the first failure."
+);
 
 /// The exception of a library error, with the command line's message (one line, each cause
-/// once): a missing file is a `FileNotFoundError`, other file-system failures `OSError`s, and
-/// everything else a bad value, `ValueError`.
+/// once): a run that produced nothing is a `NothingProduced` (exit code 3), a missing file a
+/// `FileNotFoundError`, an existing output without `overwrite` a `FileExistsError`, other
+/// file-system failures `OSError`s, and everything else a bad value, `ValueError`.
 pub fn exception(e: seasonstereo::Error) -> PyErr {
     let message = seasonstereo::error_line(&e);
+    if let Some(Incomplete::Nothing { .. }) = e.downcast_ref::<Incomplete>() {
+        return NothingProduced::new_err(message);
+    }
     match seasonstereo::io_error_kind(&e) {
         Some(ErrorKind::NotFound) => PyFileNotFoundError::new_err(message),
+        Some(ErrorKind::AlreadyExists) => PyFileExistsError::new_err(message),
         Some(ErrorKind::PermissionDenied) => PyPermissionError::new_err(message),
         Some(_) => PyOSError::new_err(message),
         None => PyValueError::new_err(message),

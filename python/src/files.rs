@@ -43,14 +43,18 @@ pub fn rectify(
         stem,
     };
     let callback = Callback::new(progress);
-    let result = compute(py, || seasonstereo::rectify(&options, &callback));
+    let result = compute(py, || {
+        options.check_output()?;
+        seasonstereo::rectify(&options, &callback)
+    });
     to_python(py, &rectify_summary(&callback.finish(result)?))
 }
 
 /// Triangulates the disparity file of a rectified pair into the DSM GeoTIFF `out` (the command
-/// line's `dsm`, same defaults: highest point per cell, no filling) and returns it.
+/// line's `dsm`, same defaults: highest point per cell, no filling) and returns it; an existing
+/// `out` is replaced only with `overwrite`.
 #[pyfunction]
-#[pyo3(signature = (disparity, homography, rpc_left, rpc_right, out, *, like=None, resolution=flags::RESOLUTION, bounds=None, epsg=None, gridding="max", fill_holes=0, median_filter=0, border=0))]
+#[pyo3(signature = (disparity, homography, rpc_left, rpc_right, out, *, like=None, resolution=flags::RESOLUTION, bounds=None, epsg=None, gridding="max", fill_holes=0, median_filter=0, border=0, overwrite=false))]
 #[allow(clippy::too_many_arguments)] // Python's keywords, one per command-line flag
 pub fn dsm<'py>(
     py: Python<'py>,
@@ -67,6 +71,7 @@ pub fn dsm<'py>(
     fill_holes: usize,
     median_filter: usize,
     border: usize,
+    overwrite: bool,
 ) -> PyResult<Dsm<'py>> {
     let options = DsmOptions {
         disparity,
@@ -81,7 +86,10 @@ pub fn dsm<'py>(
         output: out.clone(),
         compare: None,
     };
-    compute(py, || seasonstereo::dsm(&options))?;
+    compute(py, || {
+        options.check_output(overwrite)?;
+        seasonstereo::dsm(&options)
+    })?;
     read_dsm(py, out, None)
 }
 

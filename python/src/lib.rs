@@ -15,6 +15,7 @@ mod arrays;
 mod errors;
 mod files;
 mod keywords;
+mod many;
 mod predict;
 mod progress;
 mod reconstruct;
@@ -24,11 +25,16 @@ mod values;
 #[pymodule]
 fn _seasonstereo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add(
+        "NothingProduced",
+        m.py().get_type::<errors::NothingProduced>(),
+    )?;
     m.add_function(wrap_pyfunction!(predict::predict, m)?)?;
     m.add_function(wrap_pyfunction!(files::rectify, m)?)?;
     m.add_function(wrap_pyfunction!(files::dsm, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_dsm, m)?)?;
     m.add_function(wrap_pyfunction!(files::score, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(many::reconstruct_many, m)?)?;
     Ok(())
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use seasonstereo::{flags, ReconstructOptions, Roi, Shard};
+use seasonstereo::{flags, GridChoice, ReconstructOptions, Roi, Shard};
 
 use crate::errors::{compute, exception, value_error};
 use crate::keywords::Keywords;
@@ -14,15 +14,19 @@ use crate::values::{reconstruct_summary, to_python};
 
 /// Reconstructs the DSM of the raw pair `left`, `right` into `out`; returns a dict with the
 /// tiles, the DSM's grid (`transform`, `crs`) and coverage, the scores (with `truth`), each
-/// step's time in seconds and the warnings (failed tiles, suspect cameras).
+/// step's time in seconds and the warnings (failed tiles, suspect cameras). An existing `out`
+/// is replaced only with `overwrite` or when it is the product of this work folder's earlier
+/// run (resumed), as on the command line.
 #[pyfunction]
-#[pyo3(signature = (left, right, *, out, method="mgm", progress=None, **options))]
+#[pyo3(signature = (left, right, *, out, method="mgm", overwrite=false, progress=None, **options))]
+#[allow(clippy::too_many_arguments)] // Python's keywords
 pub fn reconstruct(
     py: Python<'_>,
     left: PathBuf,
     right: PathBuf,
     out: PathBuf,
     method: &str,
+    overwrite: bool,
     progress: Option<Py<PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyObject> {
@@ -30,7 +34,10 @@ pub fn reconstruct(
     let options = reconstruct_options(&keywords, method, [left, right], out)?;
     keywords.finish()?;
     let callback = Callback::new(progress);
-    let result = compute(py, || seasonstereo::reconstruct(&options, &callback));
+    let result = compute(py, || {
+        options.check_output(overwrite)?;
+        seasonstereo::reconstruct(&options, &callback)
+    });
     to_python(
         py,
         &reconstruct_summary(&callback.finish(result)?, &options)?,
@@ -45,9 +52,7 @@ fn reconstruct_options(
     out: PathBuf,
 ) -> PyResult<ReconstructOptions> {
     let matcher = k.classical(method)?.matcher().map_err(exception)?;
-    let resolution = k.take("resolution")?.unwrap_or(flags::RESOLUTION);
-    let grid = flags::grid(k.path("like")?, resolution, None, k.take("epsg")?);
-    let mut o = ReconstructOptions::new(left, right, matcher, grid, out);
+    let mut o = ReconstructOptions::new(left, right, matcher, grid(k)?, out);
     o.rpc_left = k.path("rpc_left")?;
     o.rpc_right = k.path("rpc_right")?;
     o.roi = k
@@ -60,6 +65,18 @@ fn reconstruct_options(
     dsm_keywords(k, &mut o)?;
     tiling_keywords(k, &mut o)?;
     Ok(o)
+}
+
+/// The grid of `like` (a DSM), or of `resolution` (metres) and `epsg` (default: the scene's UTM
+/// zone): the command line's `--like`, `--resolution`, `--epsg`.
+pub fn grid(k: &Keywords<'_>) -> PyResult<GridChoice> {
+    let resolution = k.take("resolution")?.unwrap_or(flags::RESOLUTION);
+    Ok(flags::grid(
+        k.path("like")?,
+        resolution,
+        None,
+        k.take("epsg")?,
+    ))
 }
 
 /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none).

@@ -61,23 +61,9 @@ fn parse_bounds(s: &str) -> Result<[f64; 4], String> {
     crate::args::parse_box(s, "XMIN,YMIN,XMAX,YMAX")
 }
 
-impl DsmArgs {
-    /// Refuses a DSM path that is one of the inputs, or an existing DSM without --overwrite.
-    fn guard_output(&self) -> Result<()> {
-        let inputs = [
-            &self.disparity,
-            &self.homography,
-            &self.rpc_left,
-            &self.rpc_right,
-        ];
-        crate::exit::guard_output("-o", &self.output, &inputs.map(|p| p.as_path()))
-    }
-}
-
 pub fn run(a: DsmArgs) -> Result<()> {
-    a.guard_output()?;
     let grid = flags::grid(a.like, a.resolution, a.bounds, a.epsg);
-    let s = disparity_to_dsm(&DsmOptions {
+    let options = DsmOptions {
         disparity: a.disparity,
         homography: a.homography,
         rpc_left: a.rpc_left,
@@ -89,7 +75,9 @@ pub fn run(a: DsmArgs) -> Result<()> {
         median_filter: flags::median_cells(a.median_filter),
         output: a.output.clone(),
         compare: a.compare,
-    })?;
+    };
+    options.check_output(crate::exit::overwrite())?;
+    let s = disparity_to_dsm(&options)?;
     println!(
         "wrote {} ({}x{} cells of {} m, EPSG:{}, {} points, {} cells filled)",
         a.output.display(),

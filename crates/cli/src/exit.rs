@@ -80,19 +80,6 @@ pub fn parse_error(e: clap::Error) -> ExitCode {
     }
 }
 
-/// As [`guard_output`], but an existing output is also replaced without `--overwrite` when
-/// `resume_marker` exists: the output of an earlier run of the same work folder (its tiles'
-/// settings are checked against the folder's), rewritten by a resumed run.
-pub fn guard_resumable_output(
-    flag: &str,
-    output: &Path,
-    inputs: &[&Path],
-    resume_marker: &Path,
-) -> anyhow::Result<()> {
-    let overwrite = safety().overwrite || resume_marker.is_file();
-    check_output_file(flag, output, inputs, overwrite)
-}
-
 /// The error of a run that wrote its output but whose `failed` items are missing from it.
 pub fn partial(what: &str, total: usize, failed: Vec<String>, retry: &str) -> anyhow::Error {
     Incomplete::Partial {

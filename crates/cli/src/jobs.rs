@@ -115,8 +115,9 @@ pub fn run(a: JobsArgs) -> Result<()> {
 }
 
 fn slurm_reconstruct(a: SlurmReconstructArgs) -> Result<()> {
-    a.reconstruct.guard_output()?;
+    let options = a.reconstruct.options()?;
     let safety = crate::exit::safety();
+    options.check_output(safety.overwrite)?;
     let flag = |on: bool, name: &str| if on { vec![name.to_string()] } else { vec![] };
     let request = SlurmRequest {
         binary: std::env::current_exe().context("locating the seasonstereo binary")?,
@@ -129,9 +130,8 @@ fn slurm_reconstruct(a: SlurmReconstructArgs) -> Result<()> {
         cpus: a.job.cpus_per_task,
         wait: a.job.wait,
     };
-    let work = a.reconstruct.work_dir();
-    let s = submit_slurm_reconstruct(&a.reconstruct.options()?, &request)?;
-    report(&s, &work)
+    let s = submit_slurm_reconstruct(&options, &request)?;
+    report(&s, &options.work())
 }
 
 /// The `reconstruct` arguments as typed: the line after `jobs slurm reconstruct`, without the

@@ -102,8 +102,8 @@ pub struct ReconstructArgs {
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
     let (tile, collar, output) = (a.tiling.tile, a.tiling.collar, a.output.clone());
     let (tiles_only, shard) = (a.tiles_only, a.shard.shard);
-    a.guard_output()?;
     let options = a.options()?;
+    options.check_output(crate::exit::overwrite())?;
     let s = reconstruct(&options, progress)?;
     println!("{}", tiles_line(&s, tile, collar));
     for w in s.warnings(&options) {
@@ -176,30 +176,6 @@ impl ReconstructArgs {
             complete_only: self.merge && !crate::exit::safety().allow_partial,
             keep_intermediates: self.keep_intermediates,
         })
-    }
-
-    /// Refuses a DSM path that is an input, or an existing DSM that is not this work folder's
-    /// (without --overwrite).
-    pub(crate) fn guard_output(&self) -> Result<()> {
-        let work = self.work_dir();
-        let inputs = [
-            Some(&self.left),
-            Some(&self.right),
-            self.rpc_left.as_ref(),
-            self.rpc_right.as_ref(),
-            self.grid.like.as_ref(),
-            self.truth.as_ref(),
-        ];
-        let inputs: Vec<&std::path::Path> =
-            inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-        crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
-    }
-
-    /// The work folder: --work, else beside the output.
-    pub(crate) fn work_dir(&self) -> PathBuf {
-        self.work
-            .clone()
-            .unwrap_or_else(|| pipeline::reconstruct::default_work_dir(&self.output))
     }
 }
 

@@ -5,9 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::outputs::Incomplete;
 use seasonstereo::{
-    reconstruct_many, FusionParams, PairChoice, PairStatus, Progress, ReconstructManyOptions,
+    reconstruct_many, FusionParams, PairChoice, Progress, ReconstructManyOptions,
     ReconstructManySummary, View,
 };
 
@@ -94,7 +93,7 @@ pub struct ReconstructManyArgs {
     matcher: MatcherArgs,
 }
 
-/// Runs the command: an error of [`Incomplete`] when some pairs failed (exit 2) or none produced
+/// Runs the command: an error of [`pipeline::outputs::Incomplete`] when some pairs failed (exit 2) or none produced
 /// a DSM (exit 3).
 pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     // Pairs of different sizes run one after the other: freed pages go back to the kernel after
@@ -109,13 +108,11 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     for p in &s.pairs {
         println!("{}", pair_line(p));
     }
-    let incomplete = warn_incomplete(&s);
-    let Some(f) = &s.fused else {
-        return Err(Incomplete::Nothing {
-            message: "no pair produced a DSM: no DSM, count, spread or report written".into(),
-        }
-        .into());
-    };
+    for w in s.warnings() {
+        eprintln!("warning: {w}");
+    }
+    s.check_produced()?;
+    let Some(f) = &s.fused else { return Ok(()) };
     println!("{}", fused_line(&s, f));
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
@@ -123,6 +120,11 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     if let Some(r) = &s.report {
         println!("report: {}", r.display());
     }
+    let incomplete: Vec<String> = s
+        .incomplete_pairs()
+        .iter()
+        .map(|p| p.stem.clone())
+        .collect();
     if incomplete.is_empty() {
         return Ok(());
     }
@@ -132,24 +134,6 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
         incomplete,
         "rerun the same command after fixing them (finished pairs and tiles are kept)",
     ))
-}
-
-/// A warning per pair that failed or lost tiles; their names.
-fn warn_incomplete(s: &ReconstructManySummary) -> Vec<String> {
-    let incomplete = s.incomplete_pairs();
-    for p in &incomplete {
-        let why = p
-            .error
-            .clone()
-            .unwrap_or_else(|| format!("tiles {} failed", p.failed_tiles.join(", ")));
-        eprintln!(
-            "warning: pair {} {}: {why} (rerun the same command after fixing it: finished pairs \
-             and tiles are kept)",
-            p.stem,
-            status_word(p.status)
-        );
-    }
-    incomplete.iter().map(|p| p.stem.clone()).collect()
 }
 
 impl ReconstructManyArgs {
@@ -223,21 +207,13 @@ fn pair_line(p: &seasonstereo::PairOutcome) -> String {
     let scores = p.scores.as_ref().map_or(String::new(), |s| {
         format!(", vs truth: {}", crate::score::format_scores(s))
     });
-    let status = status_word(p.status);
+    let status = p.status.word();
     format!(
         "pair {} {status}: {:.1} % of the grid measured, {:.1} s{scores}",
         p.stem,
         100.0 * p.measured_share,
         p.seconds
     )
-}
-
-fn status_word(s: PairStatus) -> &'static str {
-    match s {
-        PairStatus::Done => "done",
-        PairStatus::Partial => "partial (tiles failed)",
-        PairStatus::Failed => "FAILED",
-    }
 }
 
 /// The fused DSM's line.

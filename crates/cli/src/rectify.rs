@@ -44,20 +44,7 @@ pub struct RectifyArgs {
     stem: Option<String>,
 }
 
-/// Refuses an output folder that is one of the inputs or cannot be written.
-fn guard_output(a: &RectifyArgs) -> Result<()> {
-    let inputs = [
-        Some(&a.left),
-        Some(&a.right),
-        a.rpc_left.as_ref(),
-        a.rpc_right.as_ref(),
-    ];
-    let inputs: Vec<&std::path::Path> = inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-    pipeline::outputs::check_output_folder("-o", &a.output, &inputs, false)
-}
-
 pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
-    guard_output(&a)?;
     let opts = pipeline::rectify::RectifyOptions {
         left: a.left,
         right: a.right,
@@ -68,6 +55,7 @@ pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
         alt_range: a.alt_range,
         stem: a.stem,
     };
+    opts.check_output()?;
     let s = pipeline::rectify::rectify(&opts, progress)?;
     let (lo, hi) = s.disparity_range;
     println!(

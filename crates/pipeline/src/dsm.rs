@@ -55,6 +55,21 @@ pub struct DsmOptions {
     pub compare: Option<PathBuf>,
 }
 
+impl DsmOptions {
+    /// Refuses an output DSM that is one of the inputs, or an existing one unless `overwrite`:
+    /// the rule of every caller (command line, Python), before any work.
+    pub fn check_output(&self, overwrite: bool) -> Result<()> {
+        let inputs = [
+            &self.disparity,
+            &self.homography,
+            &self.rpc_left,
+            &self.rpc_right,
+        ];
+        let inputs = inputs.map(|p| p.as_path());
+        crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite)
+    }
+}
+
 /// Agreement of a DSM with a reference after the benchmark's alignment.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Comparison {

@@ -100,11 +100,17 @@ pub fn check_output_file(
         );
     }
     if !overwrite && output.exists() {
-        bail!(
-            "{flag} {} already exists: pass --overwrite to replace it (atomically), or choose \
-             another path",
-            output.display()
-        );
+        // An io::Error of its kind, so that callers can tell it from a bad value (the Python
+        // package raises `FileExistsError`); its text is the message.
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!(
+                "{flag} {} already exists: pass --overwrite to replace it (atomically), or \
+                 choose another path",
+                output.display()
+            ),
+        )
+        .into());
     }
     Ok(())
 }

@@ -235,10 +235,7 @@ pub fn plan(opts: &ReconstructOptions) -> Result<ScenePlan> {
 fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, ScenePlan)> {
     opts.check_truth()?;
     check_tile_side(opts.tile)?;
-    let work = opts
-        .work_dir
-        .clone()
-        .unwrap_or_else(|| default_work_dir(&opts.output));
+    let work = opts.work();
     sanity::check_outputs(opts, &work)?;
     let pair = open_pair(opts)?;
     let (w, h) = pair.left.size();

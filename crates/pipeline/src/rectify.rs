@@ -46,6 +46,21 @@ pub struct RectifyOptions {
     pub stem: Option<String>,
 }
 
+impl RectifyOptions {
+    /// Refuses an output folder that is one of the inputs or cannot be written (its files are
+    /// the work of this pair, replaced by a rerun): the rule of every caller, before any work.
+    pub fn check_output(&self) -> Result<()> {
+        let inputs = [
+            Some(&self.left),
+            Some(&self.right),
+            self.rpc_left.as_ref(),
+            self.rpc_right.as_ref(),
+        ];
+        let inputs: Vec<&Path> = inputs.into_iter().flatten().map(|p| p.as_path()).collect();
+        crate::outputs::check_output_folder("-o", &self.out_dir, &inputs, false)
+    }
+}
+
 /// What [`rectify`] wrote and found.
 #[derive(Clone, Debug)]
 pub struct RectifySummary {

@@ -165,6 +165,17 @@ pub enum PairStatus {
     Failed,
 }
 
+impl PairStatus {
+    /// The status as the messages say it.
+    pub fn word(self) -> &'static str {
+        match self {
+            PairStatus::Done => "done",
+            PairStatus::Partial => "partial (tiles failed)",
+            PairStatus::Failed => "FAILED",
+        }
+    }
+}
+
 /// One pair's outcome.
 #[derive(Clone, Debug, Serialize)]
 pub struct PairOutcome {
@@ -222,6 +233,38 @@ impl ReconstructManySummary {
             .iter()
             .filter(|p| p.status != PairStatus::Done)
             .collect()
+    }
+
+    /// One warning per pair that failed or lost tiles, with its cause: what the command line
+    /// prints and the Python package issues, so both say the same.
+    pub fn warnings(&self) -> Vec<String> {
+        self.incomplete_pairs()
+            .iter()
+            .map(|p| {
+                let why = p
+                    .error
+                    .clone()
+                    .unwrap_or_else(|| format!("tiles {} failed", p.failed_tiles.join(", ")));
+                let status = p.status.word();
+                format!(
+                    "pair {} {status}: {why} (rerun the same command after fixing it: finished \
+                     pairs and tiles are kept)",
+                    p.stem
+                )
+            })
+            .collect()
+    }
+
+    /// [`crate::outputs::Incomplete::Nothing`] when pairs ran and none produced a DSM (a dry
+    /// run produces nothing by design and passes): every caller ends such a run as a failure.
+    pub fn check_produced(&self) -> Result<()> {
+        if self.pairs.is_empty() || self.fused.is_some() {
+            return Ok(());
+        }
+        Err(crate::outputs::Incomplete::Nothing {
+            message: "no pair produced a DSM: no DSM, count, spread or report written".into(),
+        }
+        .into())
     }
 }
 

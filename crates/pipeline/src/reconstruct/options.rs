@@ -120,6 +120,37 @@ impl ReconstructOptions {
         }
     }
 
+    /// The work folder: `work_dir`, else beside the output.
+    pub fn work(&self) -> std::path::PathBuf {
+        self.work_dir
+            .clone()
+            .unwrap_or_else(|| super::default_work_dir(&self.output))
+    }
+
+    /// Refuses an output DSM that is one of the inputs, or an existing one unless `overwrite` or
+    /// it is the product of an earlier run of this work folder (its `scene.json` there: the
+    /// tiles' settings are checked against the folder's, and a resumed run rewrites it). The
+    /// rule of every caller (command line, Python), before any work.
+    pub fn check_output(&self, overwrite: bool) -> anyhow::Result<()> {
+        let work = self.work();
+        let like = match &self.grid {
+            GridChoice::Like(p) => Some(p),
+            _ => None,
+        };
+        let inputs = [
+            Some(&self.left),
+            Some(&self.right),
+            self.rpc_left.as_ref(),
+            self.rpc_right.as_ref(),
+            like,
+            self.truth.as_ref(),
+        ];
+        let inputs: Vec<&std::path::Path> =
+            inputs.into_iter().flatten().map(|p| p.as_path()).collect();
+        let resumed = work.join("scene.json").is_file();
+        crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite || resumed)
+    }
+
     /// How the cameras are named in messages: the JSON files, or the images' RPC tags.
     pub fn camera_names(&self) -> [String; 2] {
         let name = |rpc: &Option<PathBuf>, image: &PathBuf| match rpc {

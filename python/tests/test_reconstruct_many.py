@@ -1,0 +1,42 @@
+"""``reconstruct_many`` from Python: the command line's fused DSM byte for byte, a dry run that
+only chooses, and its refusals."""
+
+import filecmp
+
+import pytest
+
+import seasonstereo
+from conftest import run_cli
+
+# Four dev dates, two pairs: a fused DSM in well under a minute.
+DATES = ("013", "014", "015", "020")
+
+
+def test_reconstruct_many_writes_the_command_line_s_dsm(dev, cli, tmp_path):
+    images = [dev / "images" / f"JAX_068_{d}_RGB.tif" for d in DATES]
+    rpcs, truth = dev / "rpcs" / "ba", dev / "truth" / "JAX_068_DSM.tif"
+    run_cli(cli, "reconstruct-many", *images, "--rpc-dir", rpcs, "--pairs", 2, "--like", truth,
+            "-o", tmp_path / "cli" / "dsm.tif")
+    s = seasonstereo.reconstruct_many(images, rpcs, out=tmp_path / "py" / "dsm.tif", pairs=2,
+                                      like=truth)
+    assert filecmp.cmp(tmp_path / "cli" / "dsm.tif", tmp_path / "py" / "dsm.tif", shallow=False)
+    assert len(s["chosen"]) == 2 and all("score" in c["terms"] for c in s["chosen"])
+    assert [p["status"] for p in s["pairs"]] == ["done", "done"] and s["warnings"] == []
+    assert s["fused"]["crs"] == "EPSG:32617" and s["fused"]["measured_cells"] > 0
+    with pytest.raises(FileExistsError, match="already exists"):
+        seasonstereo.reconstruct_many(images, rpcs, out=tmp_path / "cli" / "dsm.tif", pairs=2,
+                                      like=truth, work=tmp_path / "elsewhere")
+
+
+def test_a_dry_run_chooses_and_writes_nothing(dev, tmp_path):
+    images = [dev / "images" / f"JAX_068_{d}_RGB.tif" for d in DATES]
+    s = seasonstereo.reconstruct_many(images, dev / "rpcs" / "ba", out=tmp_path / "dsm.tif",
+                                      pairs=2, dry_run=True)
+    assert len(s["chosen"]) == 2 and s["pairs"] == [] and s["fused"] is None
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_one_image_is_refused(dev, tmp_path):
+    with pytest.raises(ValueError):
+        seasonstereo.reconstruct_many([dev / "images" / "JAX_068_013_RGB.tif"],
+                                      dev / "rpcs" / "ba", out=tmp_path / "dsm.tif")
