@@ -33,6 +33,18 @@ const PLANS: &[(&str, Plan)] = &[
         Run,
     ),
     ("seasonstereo score out/jax/006-020.tif", Run),
+    (
+        "seasonstereo jobs slurm reconstruct left.tif",
+        Skip("needs a Slurm cluster: tests/jobs.rs runs it against a fake sbatch"),
+    ),
+    (
+        "seasonstereo jobs status --work dsm_work",
+        Skip("follows the Slurm submission above"),
+    ),
+    (
+        "seasonstereo jobs resubmit --work dsm_work",
+        Skip("follows the Slurm submission above"),
+    ),
     ("seasonstereo world --size 512 --seed 1 -o out/world", Run),
     (
         "seasonstereo world --size 4096",
