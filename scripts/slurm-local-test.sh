@@ -39,6 +39,7 @@ fi
 command -v sbatch >/dev/null || { echo "no sbatch on PATH: nothing to test"; exit 0; }
 SIZE=${1:-4096}
 T=$(mktemp -d "$PWD/slurm test XXXX")   # a path with a space, on a file system the node sees
+trap 'rm -rf "$T"' EXIT
 W="$T/world"
 "$BIN" world --size "$SIZE" --seed 3 --raw -o "$W" >/dev/null
 args=("$W/raw/WORLD_3_A.tif" "$W/raw/WORLD_3_B.tif" --rpc-left "$W/rpc/WORLD_3_A.json"
@@ -64,4 +65,3 @@ sacct -X -n -o JobID,State,ExitCode 2>/dev/null | tail -5 || true
 cp "$T/good.tif" "$W/raw/WORLD_3_A.tif"
 "$BIN" jobs resubmit --work "$T/failing/dsm_work" --wait
 cmp "$T/local.tif" "$T/failing/dsm.tif" && echo "PASS: resubmitted failed tiles; DSM byte-identical"
-rm -rf "$T"

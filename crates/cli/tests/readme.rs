@@ -41,6 +41,18 @@ const PLANS: &[(&str, Plan)] = &[
         "seasonstereo reconstruct-many $D/images/*.tif",
         Skip("12 pairs, about a minute; tests/reconstruct_many.rs runs 4 images, 3 pairs"),
     ),
+    (
+        "seasonstereo jobs slurm reconstruct left.tif",
+        Skip("needs a Slurm cluster: tests/jobs.rs runs it against a fake sbatch"),
+    ),
+    (
+        "seasonstereo jobs status --work dsm_work",
+        Skip("follows the Slurm submission above"),
+    ),
+    (
+        "seasonstereo jobs resubmit --work dsm_work",
+        Skip("follows the Slurm submission above"),
+    ),
     ("seasonstereo world --size 512 --seed 1 -o out/world", Run),
     (
         "seasonstereo world --size 4096",
