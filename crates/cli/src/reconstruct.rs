@@ -29,7 +29,8 @@ pub struct ReconstructArgs {
     left: PathBuf,
     /// Right raw image, idem with --rpc-right.
     right: PathBuf,
-    /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell).
+    /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell). Beside it `<stem>_filled.tif`,
+    /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height.
     #[arg(short, long)]
     output: PathBuf,
     /// Left camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
@@ -219,7 +220,10 @@ impl ReconstructArgs {
         ];
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-        crate::exit::guard_resumable_output("-o", &self.output, &inputs, &work.join("scene.json"))
+        let marker = work.join("scene.json");
+        let sidecar = pipeline::dsm::filled_path(&self.output);
+        crate::exit::guard_resumable_output("-o", &self.output, &inputs, &marker)?;
+        crate::exit::guard_resumable_output("-o (its _filled.tif)", &sidecar, &inputs, &marker)
     }
 
     /// How the cameras are named in warnings: the JSON files, or the images' RPC tags.
