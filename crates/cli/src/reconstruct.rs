@@ -33,7 +33,8 @@ pub struct ReconstructArgs {
     left: PathBuf,
     /// Right raw image, idem with --rpc-right.
     right: PathBuf,
-    /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell).
+    /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell). Beside it `<stem>_filled.tif`,
+    /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height.
     #[arg(short, long)]
     output: PathBuf,
     /// Left camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).

@@ -199,6 +199,34 @@ pub const DEFAULT_FILL_CELLS: usize = 40;
 /// `reconstruct`'s median window after filling, cells (odd); shared with the masks' heights.
 pub const DEFAULT_MEDIAN_CELLS: usize = 7;
 
+/// Suffix of `reconstruct`'s filled-cell sidecar, beside the DSM (`<stem>_filled.tif`).
+pub const FILLED_SUFFIX: &str = "_filled.tif";
+
+/// The filled-cell sidecar of `dsm`: `<stem>_filled.tif` in the DSM's folder.
+pub fn filled_path(dsm: &Path) -> PathBuf {
+    let stem = dsm.file_stem().map(|s| s.to_string_lossy().into_owned());
+    dsm.with_file_name(format!(
+        "{}{FILLED_SUFFIX}",
+        stem.as_deref().unwrap_or("dsm")
+    ))
+}
+
+/// Which cells of a finished DSM were measured and which invented, so that users and the fusion of
+/// several pairs need not trust filled heights as much as triangulated ones: 0 where `measured`
+/// had a height before post-processing, 1 where only `finished` has one (hole filling), NaN where
+/// `finished` has none.
+pub fn filled_mask(measured: &Image, finished: &Image) -> Result<Image> {
+    let cells = measured.data().iter().zip(finished.data());
+    let values = cells
+        .map(|(&m, &f)| match (m.is_finite(), f.is_finite()) {
+            (_, false) => f32::NAN,
+            (true, true) => 0.0,
+            (false, true) => 1.0,
+        })
+        .collect();
+    Ok(Image::new(finished.width(), finished.height(), 1, values)?)
+}
+
 /// The post-processing of a gridded DSM: hole filling within `fill_holes` cells
 /// ([`camera::fill_holes`]), then a NaN-aware median filter over an odd `median_filter` window.
 pub fn finish_dsm(
@@ -314,4 +342,34 @@ fn compare_with(
         dy: a.dy,
         offset: a.offset,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sidecar marks exactly the cells that were NaN before filling and have a height after.
+    #[test]
+    fn filled_mask_marks_the_cells_filling_added() {
+        let mut heights = vec![5.0f32; 12 * 12];
+        for y in 4..8 {
+            for x in 4..8 {
+                heights[y * 12 + x] = f32::NAN;
+            }
+        }
+        let measured = Image::new(12, 12, 1, heights).unwrap();
+        let finished = finish_dsm(measured.clone(), Some(40), None).unwrap();
+        let mask = filled_mask(&measured, &finished).unwrap();
+        for ((&m, &f), &k) in measured.data().iter().zip(finished.data()).zip(mask.data()) {
+            assert!(f.is_finite(), "the enclosed hole is filled");
+            assert_eq!(k, if m.is_nan() { 1.0 } else { 0.0 });
+        }
+        assert_eq!(mask.data().iter().filter(|&&k| k == 1.0).count(), 16);
+    }
+
+    #[test]
+    fn filled_path_is_beside_the_dsm() {
+        let p = filled_path(Path::new("out/jax.tif"));
+        assert_eq!(p, Path::new("out/jax_filled.tif"));
+    }
 }

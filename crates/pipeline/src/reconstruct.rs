@@ -630,13 +630,20 @@ fn merge_tiles(
     }
     let dsm = mosaic.into_image(grid);
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
+    let measured = dsm.clone();
     let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
-    write_dsm(&opts.output, &dsm, grid).map_err(|e| crate::outputs::Incomplete::Nothing {
-        message: format!(
-            "writing the DSM failed: {e}; the tiles stay in the work folder: free space or fix \
-             the folder and rerun the same command"
-        ),
-    })?;
+    let filled = crate::dsm::filled_mask(&measured, &dsm)?;
+    drop(measured);
+    let sidecar = crate::dsm::filled_path(&opts.output);
+    for (path, image) in [(&opts.output, &dsm), (&sidecar, &filled)] {
+        write_dsm(path, image, grid).map_err(|e| crate::outputs::Incomplete::Nothing {
+            message: format!(
+                "writing {} failed: {e}; the tiles stay in the work folder: free space or fix \
+                 the folder and rerun the same command",
+                path.display()
+            ),
+        })?;
+    }
     Ok(DsmSummary {
         points,
         measured_cells,
@@ -653,9 +660,9 @@ pub(crate) fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> R
     crate::score::score_dsm_file(dsm, &truth)
 }
 
-/// Peak bytes per DSM cell while assembling: the mosaic (height + count), the filled and the
-/// filtered copies.
-const MERGE_BYTES_PER_CELL: u64 = 18;
+/// Peak bytes per DSM cell while assembling: the mosaic (height + count), the measured, filled and
+/// filtered copies and the filled-cell sidecar.
+const MERGE_BYTES_PER_CELL: u64 = 26;
 
 pub(crate) fn gib(bytes: u64) -> f64 {
     bytes as f64 / (1u64 << 30) as f64

@@ -127,7 +127,7 @@ impl ReconstructOptions {
             .unwrap_or_else(|| super::default_work_dir(&self.output))
     }
 
-    /// Refuses an output DSM that is one of the inputs, or an existing one unless `overwrite` or
+    /// Refuses an output DSM (or its filled-cell sidecar) that is one of the inputs, or an existing one unless `overwrite` or
     /// it is the product of an earlier run of this work folder (its `scene.json` there: the
     /// tiles' settings are checked against the folder's, and a resumed run rewrites it). The
     /// rule of every caller (command line, Python), before any work.
@@ -147,8 +147,10 @@ impl ReconstructOptions {
         ];
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-        let resumed = work.join("scene.json").is_file();
-        crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite || resumed)
+        let overwrite = overwrite || work.join("scene.json").is_file();
+        let sidecar = crate::dsm::filled_path(&self.output);
+        crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite)?;
+        crate::outputs::check_output_file("-o (its _filled.tif)", &sidecar, &inputs, overwrite)
     }
 
     /// How the cameras are named in messages: the JSON files, or the images' RPC tags.
