@@ -48,7 +48,7 @@ use raw::RawImage;
 use tile::{run_tile, tile_memory, tile_rectification, Scene, TileRecord, TileStatus};
 use workers::run_on_workers;
 
-pub use options::ReconstructOptions;
+pub use options::{default_work_dir, ReconstructOptions};
 
 /// What [`reconstruct`] did.
 #[derive(Clone, Debug)]
@@ -166,15 +166,6 @@ pub const MAX_VERTICAL_PARALLAX: f32 = 3.0;
 /// is suspect: on the 45 dev pairs 0.20–0.81 with each image's camera, at most 0.09 with the
 /// cameras swapped where the offset could not be measured (28 pairs).
 pub const MIN_MATCHED_SHARE: f64 = 0.10;
-
-/// The default work folder of an output DSM: `out/dsm.tif` → `out/dsm_work`.
-pub fn default_work_dir(output: &Path) -> PathBuf {
-    let stem = output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "dsm".into());
-    output.with_file_name(format!("{stem}_work"))
-}
 
 /// What the tiles of a work folder were computed with (`scene.json`): a rerun with other
 /// settings must not mix its tiles with these.

@@ -1,7 +1,7 @@
 //! What to reconstruct and how: the options of [`super::reconstruct`], in a file of their own so
 //! that the checks before work (`sanity`) read them without importing the job.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use camera::rectify::Roi;
 use camera::Gridding;
@@ -124,7 +124,7 @@ impl ReconstructOptions {
     pub fn work(&self) -> std::path::PathBuf {
         self.work_dir
             .clone()
-            .unwrap_or_else(|| super::default_work_dir(&self.output))
+            .unwrap_or_else(|| default_work_dir(&self.output))
     }
 
     /// Refuses an output DSM (or its filled-cell sidecar) that is one of the inputs, or an existing one unless `overwrite` or
@@ -164,4 +164,13 @@ impl ReconstructOptions {
             name(&self.rpc_right, &self.right),
         ]
     }
+}
+
+/// The default work folder of an output DSM: `out/dsm.tif` → `out/dsm_work`.
+pub fn default_work_dir(output: &Path) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "dsm".into());
+    output.with_file_name(format!("{stem}_work"))
 }
