@@ -3,7 +3,12 @@
 //! array index in turn, so a submission is a complete run. Checked: arguments and quoting (paths
 //! with spaces, `--sbatch-args`), the array size, the `afterany` merge, the DSM byte-identical to
 //! a local `reconstruct`, a failed tile named by `jobs status` (exit 2) and the merge refusing it
-//! (exit 3), and `jobs resubmit` sending only the failed tasks.
+//! (exit 3), and `jobs resubmit` sending only the failed tasks. The fake honours dependencies:
+//! a job `afterok` on a failed one is cancelled with `--kill-on-invalid-dep=yes` and logged as
+//! pending for ever without. `jobs slurm dataset`: the stages' arguments passed through (spaces,
+//! quotes), arrays of --shards tasks, `afterany` checks, a failed teacher shard named by the
+//! check step with the resubmit command and the rest of the chain cancelled, and `jobs resubmit`
+//! sending exactly that shard, then the later stages, to the same training set.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -11,16 +16,25 @@ use std::process::{Command, Output};
 const SBATCH: &str = r#"#!/bin/sh
 log="$FAKE_SLURM_LOG"; n=$(( $(cat "$log.count" 2>/dev/null || echo 0) + 1 )); echo $n > "$log.count"
 printf 'sbatch' >> "$log"; for a in "$@"; do printf ' [%s]' "$a" >> "$log"; done; echo >> "$log"
-array=""; wait=0; for a in "$@"; do case "$a" in --array=*) array=${a#--array=};; --wait) wait=1;; esac; script=$a; done
-rc=0
+array=""; wait=0; dep=""; kill=0
+for a in "$@"; do case "$a" in --array=*) array=${a#--array=};; --wait) wait=1;; --dependency=*) dep=${a#--dependency=};; --kill-on-invalid-dep=yes) kill=1;; esac; script=$a; done
+case "$dep" in afterok:*)
+  if [ "$(cat "$log.exit.${dep#afterok:}")" != 0 ]; then
+    echo 1 > "$log.exit.$n"; echo "$n"
+    if [ $kill = 1 ]; then echo "job $n cancelled (dependency never satisfied)" >> "$log"; [ $wait = 1 ] && exit 1; exit 0; fi
+    echo "job $n pending for ever (DependencyNeverSatisfied)" >> "$log"; exit 0
+  fi;;
+esac
+rc=0; state=0
 if [ -n "$array" ]; then
   for part in $(echo "$array" | tr ',' ' '); do
     lo=${part%-*}; hi=${part#*-}; i=$lo
-    while [ $i -le $hi ]; do SLURM_ARRAY_TASK_ID=$i sh "$script" >> "$log.out" 2>&1 || echo "task $i exit $?" >> "$log"; i=$((i+1)); done
+    while [ $i -le $hi ]; do SLURM_ARRAY_TASK_ID=$i sh "$script" >> "$log.out" 2>&1 || { echo "task $i exit $?" >> "$log"; state=1; }; i=$((i+1)); done
   done
 else
-  sh "$script" >> "$log.out" 2>&1; rc=$?; echo "job $n exit $rc" >> "$log"
+  sh "$script" >> "$log.out" 2>&1; rc=$?; state=$rc; echo "job $n exit $rc" >> "$log"
 fi
+echo $state > "$log.exit.$n"
 echo "$n"
 [ $wait = 1 ] && exit $rc; exit 0
 "#;
@@ -207,4 +221,176 @@ fn a_submission_gives_the_local_dsm_and_failed_tiles_are_named_and_resubmitted()
         std::fs::read(&failing).unwrap(),
         std::fs::read(&local).unwrap()
     );
+}
+
+/// `jobs slurm dataset` arguments of the world sources in `src` onto `work` and `out`.
+fn dataset_args(src: &Path, work: &Path, out: &Path) -> Vec<String> {
+    let p = |p: &Path| p.display().to_string();
+    let mut v: Vec<String> = ["jobs", "slurm", "dataset", "--pairs"]
+        .map(String::from)
+        .to_vec();
+    v.extend([p(&src.join("pairs")), "--raw".into(), p(&src.join("raw"))]);
+    v.extend(["--work".into(), p(work), "-o".into(), p(out)]);
+    v.extend(
+        [
+            "--shards",
+            "2",
+            "--curate-args",
+            "--keep 100%",
+            "--build-args",
+            "--teacher-name 'sgm x' --seed 3",
+            "--sbatch-args",
+            "-p debug --comment 'a b'",
+            "--wait",
+        ]
+        .map(String::from),
+    );
+    v
+}
+
+fn run_strings(cluster: &Cluster, args: &[String]) -> Output {
+    cluster.run(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+#[test]
+fn dataset_stages_chain_with_checks_and_a_failed_shard_is_resubmitted_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = Cluster::new(dir.path());
+    let world = dir.path().join("world set");
+    let o = cluster.run(&[
+        "dataset",
+        "world",
+        "--size",
+        "128",
+        "--worlds",
+        "3",
+        "-o",
+        world.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let src = world.join("sources/train");
+
+    // A typo in a stage's options fails before anything is submitted.
+    let mut bad = dataset_args(&src, &dir.path().join("w0"), &dir.path().join("s0"));
+    let at = bad.iter().position(|a| a == "--keep 100%").unwrap();
+    bad[at] = "--kepp 3".into();
+    let o = run_strings(&cluster, &bad);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("fix --curate-args"), "{}", text(&o));
+    assert!(cluster.log().is_empty(), "{}", cluster.log());
+
+    // The whole chain: 5 arrays of 2 tasks, a check after each, the finalize.
+    let (work, out) = (dir.path().join("my work"), dir.path().join("my set"));
+    let o = run_strings(&cluster, &dataset_args(&src, &work, &out));
+    assert!(o.status.success(), "{}\n{}", text(&o), cluster.log());
+    let log = cluster.log();
+    assert_eq!(log.matches("[--array=0-1]").count(), 5, "{log}");
+    for (stage, check, next) in [(1, 2, 3), (3, 4, 5), (5, 6, 7), (7, 8, 9), (9, 10, 11)] {
+        assert!(
+            log.contains(&format!("[--dependency=afterany:{stage}]")),
+            "{log}"
+        );
+        let after = format!("[--dependency=afterok:{check}] [--kill-on-invalid-dep=yes]");
+        assert!(log.contains(&after), "{next}: {log}");
+    }
+    assert!(log.contains("[-p] [debug] [--comment] [a b]"), "{log}");
+    assert!(!log.lines().any(|l| l.starts_with("task ")), "{log}");
+    assert!(
+        !log.lines()
+            .any(|l| l.starts_with("job ") && !l.ends_with("exit 0")),
+        "{log}"
+    );
+    assert!(out.join("manifest.json").is_file());
+    assert!(out.join("disparity_maps/sgm x").is_dir());
+    let script = std::fs::read_to_string(work.join("jobs/build.sh")).unwrap();
+    assert!(
+        script.contains("--teacher-name 'sgm x' --seed 3"),
+        "{script}"
+    );
+    assert!(script.contains("--shard \"$i/2\""), "{script}");
+    let o = cluster.run(&["jobs", "status", "--work", work.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("teacher    2 shards: 2 done"),
+        "{}",
+        text(&o)
+    );
+
+    // Teacher shard 0 fails (its first pair's output path is taken by a folder): the check
+    // names it and the resubmit command, the rest of the chain is cancelled, not left pending.
+    let mut stems: Vec<String> = std::fs::read_dir(src.join("pairs/L"))
+        .unwrap()
+        .map(|e| {
+            e.unwrap()
+                .path()
+                .file_stem()
+                .unwrap()
+                .to_string_lossy()
+                .into()
+        })
+        .collect();
+    stems.sort();
+    let (work, out) = (
+        dir.path().join("failing work"),
+        dir.path().join("failing set"),
+    );
+    let blocker = work.join("teacher").join(format!("{}.iio", stems[0]));
+    std::fs::create_dir_all(blocker.join("x")).unwrap();
+    let before = cluster.log().len();
+    let o = run_strings(&cluster, &dataset_args(&src, &work, &out));
+    assert_eq!(o.status.code(), Some(2), "{}\n{}", text(&o), cluster.log());
+    let log = cluster.log()[before..].to_string();
+    assert!(log.contains("task 0 exit"), "{log}");
+    assert!(!log.contains("task 1 exit"), "{log}");
+    assert_eq!(log.matches("cancelled").count(), 5, "{log}");
+    assert!(!log.contains("pending for ever"), "{log}");
+    assert!(!out.join("manifest.json").exists());
+    let checks = std::fs::read_to_string(format!("{}.out", cluster.log.display())).unwrap();
+    assert!(
+        checks.contains("failed  teacher shard 0/2 (task 0): exit code 2"),
+        "{checks}"
+    );
+    assert!(
+        checks.contains("seasonstereo jobs resubmit --work"),
+        "{checks}"
+    );
+    let o = cluster.run(&["jobs", "status", "--work", work.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(
+        text(&o).contains("teacher    2 shards: 1 done, 1 failed"),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        text(&o).contains("missing curate shard 1/2 (task 1)"),
+        "{}",
+        text(&o)
+    );
+
+    std::fs::remove_dir_all(&blocker).unwrap();
+    let before = cluster.log().len();
+    let o = cluster.run(&[
+        "jobs",
+        "resubmit",
+        "--work",
+        work.to_str().unwrap(),
+        "--wait",
+    ]);
+    assert!(o.status.success(), "{}\n{}", text(&o), cluster.log());
+    let log = cluster.log()[before..].to_string();
+    let first = log.lines().next().unwrap();
+    assert!(
+        first.contains("[--array=0]") && first.contains("teacher.sh"),
+        "{log}"
+    );
+    assert_eq!(log.matches("[--array=0-1]").count(), 4, "{log}");
+    for list in [
+        "experiments/sub1_synchronic.csv",
+        "experiments/sub5_syndiach.csv",
+    ] {
+        let a = std::fs::read(dir.path().join("my set").join(list)).unwrap();
+        assert_eq!(a, std::fs::read(out.join(list)).unwrap(), "{list}");
+    }
+    let o = cluster.run(&["jobs", "status", "--work", work.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
 }

@@ -55,7 +55,10 @@ pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
 pub use pipeline::eval::metrics::DsmScores;
 pub use pipeline::eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
-pub use pipeline::jobs::{JobStatus, Resources, SlurmRequest, Submitted};
+pub use pipeline::jobs::{
+    ChainRequest, ChainStatus, ChainSubmitted, JobStatus, Resources, SlurmRequest, StageLine,
+    StageStatus, Submitted, Units,
+};
 #[cfg(feature = "network")]
 pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
@@ -100,6 +103,25 @@ pub fn job_status(work: &Path) -> Result<JobStatus> {
 /// after them; with `wait`, until the merge ends.
 pub fn resubmit_slurm(work: &Path, wait: bool) -> Result<Submitted> {
     pipeline::jobs::resubmit(work, wait)
+}
+
+/// Submits a chain of sharded stages to Slurm: one array job per stage, a check step after
+/// each (`afterany`) that fails naming the failed shards, the next stage `afterok` on it with
+/// `--kill-on-invalid-dep=yes`. Scripts, shard markers and `jobs/chain.json` go into the work
+/// folder.
+pub fn submit_slurm_chain(request: &ChainRequest) -> Result<ChainSubmitted> {
+    pipeline::jobs::submit_chain(request)
+}
+
+/// The shards of every stage of the chain in `work`: done, failed (exit code, log), missing.
+pub fn chain_status(work: &Path) -> Result<ChainStatus> {
+    pipeline::jobs::chain_status(work)
+}
+
+/// Submits again the failed and missing shards of the chain's first unfinished stage and every
+/// later stage; with `wait`, until the last stage ends.
+pub fn resubmit_slurm_chain(work: &Path, wait: bool) -> Result<ChainSubmitted> {
+    pipeline::jobs::resubmit_chain(work, wait)
 }
 
 /// Rectifies a raw satellite pair from its RPC cameras (epipolar lines become rows) into the

@@ -1,6 +1,22 @@
-//! Shell words: quoting arguments into a job script, splitting a user's `--sbatch-args`.
+//! Shell words and job scripts: quoting arguments into a job script, splitting a user's
+//! `--sbatch-args`, writing a script that starts in the submitting folder.
+
+use std::path::Path;
 
 use anyhow::{bail, Result};
+
+use crate::stage::write_text;
+
+/// Writes the job script `path` (atomically): a `/bin/sh` header naming the command that wrote
+/// it (`by`, e.g. "jobs slurm reconstruct") and `what` it runs, a `cd` into `cwd` (relative
+/// paths of the arguments are relative to it), then `body`.
+pub fn write_script(path: &Path, by: &str, what: &str, cwd: &Path, body: &str) -> Result<()> {
+    let head = format!(
+        "#!/bin/sh\n# Written by `seasonstereo {by}` for {what}.\ncd {} || exit 1\n",
+        quote(&cwd.display().to_string())
+    );
+    write_text(path, &format!("{head}{body}"))
+}
 
 /// `word` as one POSIX shell word: unchanged when it is made of safe characters, else in single
 /// quotes (a quote inside written `'\''`).

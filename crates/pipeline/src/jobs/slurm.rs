@@ -8,10 +8,10 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 
 use super::record::{jobs_dir, SlurmRecord};
-use super::script::{join, quote};
+use super::sbatch::sbatch;
+use super::script::{join, quote, write_script};
 use super::status::{array_spec, status};
 use crate::reconstruct::{plan, ReconstructOptions, ScenePlan};
-use crate::stage::write_text;
 
 /// What to submit besides the reconstruction's own options.
 #[derive(Clone, Debug, Default)]
@@ -83,7 +83,7 @@ pub fn submit_reconstruct(opts: &ReconstructOptions, req: &SlurmRequest) -> Resu
 /// them.
 pub fn resubmit(work: &Path, wait: bool) -> Result<Submitted> {
     let s = status(work)?;
-    let tasks = s.tasks_to_rerun();
+    let tasks = s.tiles.tasks_to_rerun();
     if tasks.is_empty() {
         bail!(
             "every tile of {} is finished: nothing to resubmit (run the merge script {} if the \
@@ -163,25 +163,25 @@ fn write_scripts(
     );
     let tiles_script = dir.join("reconstruct-tiles.sh");
     let merge_script = dir.join("reconstruct-merge.sh");
-    let head = format!(
-        "#!/bin/sh\n# Written by `seasonstereo jobs slurm reconstruct` for the {} tiles of {}.\n\
-         cd {} || exit 1\n",
-        plan.tiles.len(),
-        plan.stem,
-        quote(&req.cwd.display().to_string())
-    );
-    write_text(
+    let what = format!("the {} tiles of {}", plan.tiles.len(), plan.stem);
+    write_script(
         &tiles_script,
+        "jobs slurm reconstruct",
+        &what,
+        &req.cwd,
         &format!(
-            "{head}# Array task I runs the tiles at positions I, I+{array_size}, … of the plan; \
+            "# Array task I runs the tiles at positions I, I+{array_size}, … of the plan; \
              exit code 2 when some failed.\n{run} --tiles-only --shard \
              \"${{SLURM_ARRAY_TASK_ID:?run as a Slurm array task}}/{array_size}\"\n"
         ),
     )?;
     let merge_flags = join(&req.merge_flags);
-    write_text(
+    write_script(
         &merge_script,
-        &format!("{head}# The DSM from the tiles; exit code 3 while tiles are failed.\n{run} --merge {merge_flags}\n"),
+        "jobs slurm reconstruct",
+        &what,
+        &req.cwd,
+        &format!("# The DSM from the tiles; exit code 3 while tiles are failed.\n{run} --merge {merge_flags}\n"),
     )?;
     let sbatch = |kind: &str, r: Resources, log: &str| -> Vec<String> {
         let mut v = vec![
@@ -243,28 +243,4 @@ fn submit(work: &Path, mut record: SlurmRecord, tasks: &[usize], wait: bool) -> 
         resources: None,
         merge_exit: exit,
     })
-}
-
-/// Runs `sbatch args`: the job id, and its exit code with `wait` (`sbatch --wait` exits with the
-/// job's).
-fn sbatch(args: &[String], wait: bool) -> Result<(String, Option<i32>)> {
-    let out = Command::new("sbatch")
-        .args(args)
-        .output()
-        .context("running sbatch (is this a Slurm login node, with sbatch on PATH?)")?;
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let id = stdout
-        .lines()
-        .find_map(|l| l.split(';').next().map(str::trim).filter(|s| !s.is_empty()))
-        .map(str::to_string);
-    match id {
-        Some(id) if out.status.success() || wait => {
-            Ok((id, wait.then(|| out.status.code().unwrap_or(1))))
-        }
-        _ => bail!(
-            "sbatch {} failed: {}",
-            join(args),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ),
-    }
 }

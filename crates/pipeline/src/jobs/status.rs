@@ -1,5 +1,5 @@
-//! What a submitted reconstruction's work folder holds: tiles done, failed (with their errors)
-//! and missing, and the array tasks to run again.
+//! What a submitted job's work folder holds: units (tiles, shards) done, failed (with their
+//! errors) and missing, and the array tasks to run again.
 
 use std::path::{Path, PathBuf};
 
@@ -9,21 +9,19 @@ use super::record::SlurmRecord;
 use crate::reconstruct::folder::TileFolder;
 use crate::reconstruct::tile::TileStatus;
 
-/// The tiles of a submission, by state.
-#[derive(Clone, Debug)]
-pub struct JobStatus {
-    pub work: PathBuf,
-    pub record: SlurmRecord,
-    /// Finished tiles (with points, or empty: nothing to match).
+/// The work units of an array job (a reconstruction's tiles, a stage's shards), by state.
+#[derive(Clone, Debug, Default)]
+pub struct Units {
+    /// Finished units (tiles with points or empty, shards that exited 0).
     pub done: Vec<String>,
-    /// Failed tiles: `(id, array task, error)`.
+    /// Failed units: `(id, array task, error)`.
     pub failed: Vec<(String, usize, String)>,
-    /// Tiles without a record (their task has not run, or was killed): `(id, array task)`.
+    /// Units without a record (their task has not run, or was killed): `(id, array task)`.
     pub missing: Vec<(String, usize)>,
 }
 
-impl JobStatus {
-    /// The array tasks holding a failed or missing tile, in order.
+impl Units {
+    /// The array tasks holding a failed or missing unit, in order.
     pub fn tasks_to_rerun(&self) -> Vec<usize> {
         let mut tasks: Vec<usize> = self
             .failed
@@ -41,23 +39,42 @@ impl JobStatus {
         array_spec(&self.tasks_to_rerun())
     }
 
-    /// Every tile finished.
+    /// Every unit finished.
     pub fn complete(&self) -> bool {
         self.failed.is_empty() && self.missing.is_empty()
     }
+
+    /// The failed units' ids, then the missing ones'.
+    pub fn unfinished(&self) -> Vec<String> {
+        let failed = self.failed.iter().map(|f| f.0.clone());
+        failed
+            .chain(self.missing.iter().map(|m| m.0.clone()))
+            .collect()
+    }
+
+    /// The number of units.
+    pub fn len(&self) -> usize {
+        self.done.len() + self.failed.len() + self.missing.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The tiles of a submission, by state.
+#[derive(Clone, Debug)]
+pub struct JobStatus {
+    pub work: PathBuf,
+    pub record: SlurmRecord,
+    pub tiles: Units,
 }
 
 /// The state of the tiles of the submission in `work`, read from the tiles' records.
 pub fn status(work: &Path) -> Result<JobStatus> {
     let record = SlurmRecord::read(work)?;
     let folder = TileFolder::new(work);
-    let mut s = JobStatus {
-        work: work.to_path_buf(),
-        record: record.clone(),
-        done: Vec::new(),
-        failed: Vec::new(),
-        missing: Vec::new(),
-    };
+    let mut s = Units::default();
     for tile in &record.tiles {
         let task = record.task_of(tile.index);
         match folder.record(tile) {
@@ -70,7 +87,11 @@ pub fn status(work: &Path) -> Result<JobStatus> {
             Some(_) => s.done.push(tile.id.clone()),
         }
     }
-    Ok(s)
+    Ok(JobStatus {
+        work: work.to_path_buf(),
+        record,
+        tiles: s,
+    })
 }
 
 /// Slurm's `--array` value for `tasks`: `0-3` for a run, else `1,4,7`.

@@ -1,6 +1,9 @@
-//! `seasonstereo jobs`: a reconstruction submitted to a Slurm cluster, its tiles' state, and its
-//! failed tiles submitted again. The arguments map onto the library's `SlurmRequest`; the plan,
-//! the scripts and the submission live in the library.
+//! `seasonstereo jobs`: a reconstruction or the training-set stages submitted to a Slurm
+//! cluster, their tiles' or shards' state, and what failed submitted again. The arguments map
+//! onto the library's `SlurmRequest` / `ChainRequest`; the plan, the scripts and the submission
+//! live in the library.
+
+mod dataset;
 
 use std::path::{Path, PathBuf};
 
@@ -9,7 +12,7 @@ use clap::{Args, Subcommand};
 use pipeline::jobs::script::{quote, split};
 use pipeline::outputs::Incomplete;
 use seasonstereo::{
-    job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted,
+    job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted, Units,
 };
 
 use crate::reconstruct::ReconstructArgs;
@@ -22,13 +25,17 @@ pub struct JobsArgs {
 
 #[derive(Subcommand)]
 enum JobsCommand {
-    /// Submit a command to Slurm (sbatch): `jobs slurm reconstruct <reconstruct arguments>`.
+    /// Submit to Slurm (sbatch): `jobs slurm reconstruct <reconstruct arguments>` or `jobs slurm
+    /// dataset <the training-set stages' folders and options>`.
     #[command(subcommand)]
     Slurm(SlurmCommand),
-    /// The tiles of a submission: done, failed (with their errors) and missing, and the command
-    /// that resubmits only the failed ones. Exit code 2 while some are failed or missing.
-    Status(WorkArg),
-    /// Submit again only the array tasks whose tiles failed or are missing, then the merge.
+    /// The tiles (reconstruct) or each stage's shards (dataset) of a submission: done, failed
+    /// (with their errors) and missing, and the command that resubmits only the failed ones.
+    /// Exit code 2 while some are failed or missing.
+    Status(StatusArgs),
+    /// Submit again only the array tasks whose tiles failed or are missing, then the merge; for
+    /// a dataset job, the failed and missing shards of the first unfinished stage, then every
+    /// later stage (finished items are skipped).
     Resubmit(ResubmitArgs),
 }
 
@@ -45,6 +52,15 @@ enum SlurmCommand {
         dsm_work"
     )]
     Reconstruct(Box<SlurmReconstructArgs>),
+    /// The training-set build, one array job of --shards tasks per stage: teacher → curate →
+    /// synthesize → masks → dataset build, then one unsharded `dataset build` (lists and
+    /// manifest). Each stage's arguments are passed through exactly (shell-quoted job scripts in
+    /// WORK/jobs/); a check step after each stage (`afterany`) fails, naming the failed shards
+    /// and the resubmit command, unless all its shards exited 0, and the next stage runs
+    /// `afterok` on it with --kill-on-invalid-dep=yes: a failed shard cancels the rest of the
+    /// chain instead of leaving it pending.
+    #[command(after_help = dataset::AFTER_HELP)]
+    Dataset(Box<dataset::SlurmDatasetArgs>),
 }
 
 #[derive(Args)]
@@ -82,6 +98,16 @@ pub struct WorkArg {
 }
 
 #[derive(Args)]
+pub struct StatusArgs {
+    #[command(flatten)]
+    work: WorkArg,
+    /// Dataset jobs: only this stage's shards (exit code 2 unless all exited 0); the check
+    /// steps between stages run this.
+    #[arg(long, value_name = "NAME")]
+    stage: Option<String>,
+}
+
+#[derive(Args)]
 pub struct ResubmitArgs {
     #[command(flatten)]
     work: WorkArg,
@@ -106,7 +132,20 @@ const TASK_OPTIONS: [&str; 3] = ["--shard", "--merge", "--tiles-only"];
 pub fn run(a: JobsArgs) -> Result<()> {
     match a.command {
         JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(*r),
-        JobsCommand::Status(w) => print_status(&job_status(&w.work)?),
+        JobsCommand::Slurm(SlurmCommand::Dataset(d)) => dataset::submit(*d),
+        JobsCommand::Status(s) if pipeline::jobs::is_chain(&s.work.work) => {
+            dataset::status(&s.work.work, s.stage.as_deref())
+        }
+        JobsCommand::Status(s) => match s.stage {
+            Some(_) => bail!(
+                "--stage is for dataset jobs: {} holds a reconstruction (leave --stage out)",
+                s.work.work.display()
+            ),
+            None => print_status(&job_status(&s.work.work)?),
+        },
+        JobsCommand::Resubmit(r) if pipeline::jobs::is_chain(&r.work.work) => {
+            dataset::resubmit(&r.work.work, r.wait)
+        }
         JobsCommand::Resubmit(r) => {
             let s = resubmit_slurm(&r.work.work, r.wait)?;
             report(&s, &r.work.work)
@@ -218,51 +257,46 @@ fn print_status(s: &JobStatus) -> Result<()> {
         "{}: {} tiles: {} done, {} failed, {} missing; array of {} tasks; last jobs: {jobs}",
         s.work.display(),
         r.tiles.len(),
-        s.done.len(),
-        s.failed.len(),
-        s.missing.len(),
+        s.tiles.done.len(),
+        s.tiles.failed.len(),
+        s.tiles.missing.len(),
         r.array_size
     );
-    print_tiles(s);
-    if s.complete() {
+    print_units(&s.tiles);
+    if s.tiles.complete() {
         println!(
             "every tile is finished; the DSM is the merge's ({})",
             r.merge_script.display()
         );
         return Ok(());
     }
-    incomplete(s)
+    incomplete(&s.tiles, "tiles", &s.work)
 }
 
-/// One line per failed (with its error) and missing tile.
-fn print_tiles(s: &JobStatus) {
-    for (id, task, error) in &s.failed {
+/// One line per failed (with its error) and missing unit.
+fn print_units(units: &Units) {
+    for (id, task, error) in &units.failed {
         println!("failed  {id} (task {task}): {error}");
     }
-    for (id, task) in &s.missing {
+    for (id, task) in &units.missing {
         println!("missing {id} (task {task})");
     }
 }
 
-/// The command that resubmits the failed and missing tiles' tasks, and exit code 2 naming them.
-fn incomplete(s: &JobStatus) -> Result<()> {
-    let r = &s.record;
+/// The command that resubmits the failed and missing units' tasks, and exit code 2 naming
+/// them (`what`: "tiles", "teacher shards").
+fn incomplete(units: &Units, what: &str, work: &Path) -> Result<()> {
     println!(
         "resubmit only these (array tasks {}): seasonstereo jobs resubmit --work {}",
-        s.rerun_array(),
-        quote(&s.work.display().to_string())
+        units.rerun_array(),
+        quote(&work.display().to_string())
     );
-    let names: Vec<String> = s
-        .failed
-        .iter()
-        .map(|f| f.0.clone())
-        .chain(s.missing.iter().map(|m| m.0.clone()))
-        .collect();
+    let names = units.unfinished();
     Err(Incomplete::Partial {
         message: format!(
-            "{} of {} tiles failed or missing ({}): resubmit them as above",
+            "{} of {} {what} failed or missing ({}): resubmit them as above",
             names.len(),
-            r.tiles.len(),
+            units.len(),
             pipeline::outputs::first_names(&names)
         ),
         failed: names,

@@ -1,0 +1,303 @@
+//! `seasonstereo jobs slurm dataset`: the training-set stages as a Slurm chain, and the status
+//! and resubmission of such a chain. The folders and per-stage options map onto the library's
+//! `ChainRequest`; the scripts, markers and submission live in the library.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser};
+use pipeline::jobs::script::{quote, split};
+use seasonstereo::{chain_status, resubmit_slurm_chain, submit_slurm_chain, ChainRequest};
+use seasonstereo::{ChainStatus, ChainSubmitted, StageLine};
+
+pub const AFTER_HELP: &str = "The stages, each sharded --shards ways (`--shard I/N`, finished \
+    items skipped, files written atomically), with WORK's folders between them:\n  \
+    teacher    --pairs PAIRS -o WORK/teacher                    [--teacher-args]\n  \
+    curate     --pairs PAIRS --teacher WORK/teacher -o WORK/curate [--curate-args]\n  \
+    synthesize --pairs PAIRS --raw RAW --selected WORK/curate/selected.txt -o WORK/synthetic \
+    [--synthesize-args]\n  \
+    masks      --images WORK/synthetic/cropped -o WORK/masks     [--masks-args]\n  \
+    dataset build --pairs PAIRS --selected WORK/curate/selected.txt --synthetic WORK/synthetic \
+    --masks WORK/masks --teacher WORK/teacher -o OUT [--build-args]\n  \
+    finalize: the same `dataset build` once, unsharded (every pair skipped; the lists and \
+    manifest.json).\n\
+    Each line is checked by this command's parser before anything is submitted.\n\n\
+    WORK/jobs/ holds the scripts (<stage>.sh, check-<stage>.sh), logs/, shards/<stage>/<I>.exit \
+    (each task's exit code; none = not run or killed) and chain.json. WORK, the binary and the \
+    inputs must be on a file system every node sees.\n\n\
+    Example:\n  seasonstereo jobs slurm dataset --pairs data/synchronic_only --raw data/raw \
+    --work work -o data/diachronic-stereo-synthetic --shards 16 --curate-args \"--keep 1000\" \\\n    \
+    --sbatch-args \"--cpus-per-task=8 --mem=32G --time=04:00:00\"\nThen: seasonstereo jobs status \
+    --work work (per-stage shards); seasonstereo jobs resubmit --work work";
+
+#[derive(Args)]
+pub struct SlurmDatasetArgs {
+    /// Synchronic pairs folder (L/, R/, homography/), read by teacher, curate, synthesize and
+    /// dataset build.
+    #[arg(long, value_name = "DIR")]
+    pairs: PathBuf,
+    /// Folder of the raw images (searched recursively by image id), read by synthesize.
+    #[arg(long, value_name = "DIR")]
+    raw: PathBuf,
+    /// Work folder: the stages' outputs (teacher/, curate/, synthetic/, masks/) and jobs/.
+    #[arg(long, value_name = "DIR")]
+    work: PathBuf,
+    /// The training set (dataset build's output folder).
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    /// Array tasks per stage (`--shard I/N`, I = the task's index).
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    shards: usize,
+    /// More `teacher` options as one string, e.g. "--model monsterpp --weights m.pth".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    teacher_args: Option<String>,
+    /// More `curate` options as one string, e.g. "--keep 1000".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    curate_args: Option<String>,
+    /// More `synthesize` options as one string, e.g. "--generator gemini --prompts s.toml".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    synthesize_args: Option<String>,
+    /// More `masks` options as one string, e.g. "--segformer mit-b2.pt".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    masks_args: Option<String>,
+    /// More `dataset build` options (also of the finalize pass) as one string, e.g. "--seed 3".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    build_args: Option<String>,
+    /// More sbatch options for every job, as one string (partition, account, time limit, CPUs,
+    /// memory, GPUs), e.g. "-p long --cpus-per-task=8 --mem=32G"; after ours, so they win.
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    sbatch_args: Option<String>,
+    /// Block until the finalize pass ends; exit 0 when it succeeded, else 2 naming the failed
+    /// shards.
+    #[arg(long)]
+    wait: bool,
+}
+
+/// Submits the chain and reports its jobs.
+pub fn submit(a: SlurmDatasetArgs) -> Result<()> {
+    let request = ChainRequest {
+        what: "dataset".into(),
+        binary: std::env::current_exe().context("locating the seasonstereo binary")?,
+        cwd: std::env::current_dir().context("reading the current folder")?,
+        work: a.work.clone(),
+        stages: stage_lines(&a)?,
+        shards: a.shards,
+        sbatch_args: split(a.sbatch_args.as_deref().unwrap_or(""))?,
+        wait: a.wait,
+    };
+    if a.shards == 0 {
+        bail!("--shards 0: give at least 1 array task per stage");
+    }
+    let s = submit_slurm_chain(&request)?;
+    report(&s, &a.work)
+}
+
+/// The six stage lines, each checked by the parser; the global flags go to every stage.
+fn stage_lines(a: &SlurmDatasetArgs) -> Result<Vec<StageLine>> {
+    let w = |sub: &str| a.work.join(sub).display().to_string();
+    let (pairs, raw, out) = (a.pairs.display(), a.raw.display(), a.output.display());
+    let (teacher, curate, synthetic) = (w("teacher"), w("curate"), w("synthetic"));
+    let (masks, selected, cropped) = (w("masks"), w("curate/selected.txt"), w("synthetic/cropped"));
+    let (pairs, raw, out) = (pairs.to_string(), raw.to_string(), out.to_string());
+    let build = words(&[
+        "dataset",
+        "build",
+        "--pairs",
+        &pairs,
+        "--selected",
+        &selected,
+        "--synthetic",
+        &synthetic,
+        "--masks",
+        &masks,
+        "--teacher",
+        &teacher,
+        "-o",
+        &out,
+    ]);
+    let lines = [
+        (
+            "teacher",
+            words(&["teacher", "--pairs", &pairs, "-o", &teacher]),
+            &a.teacher_args,
+        ),
+        (
+            "curate",
+            words(&[
+                "curate",
+                "--pairs",
+                &pairs,
+                "--teacher",
+                &teacher,
+                "-o",
+                &curate,
+            ]),
+            &a.curate_args,
+        ),
+        (
+            "synthesize",
+            words(&[
+                "synthesize",
+                "--pairs",
+                &pairs,
+                "--raw",
+                &raw,
+                "--selected",
+                &selected,
+                "-o",
+                &synthetic,
+            ]),
+            &a.synthesize_args,
+        ),
+        (
+            "masks",
+            words(&["masks", "--images", &cropped, "-o", &masks]),
+            &a.masks_args,
+        ),
+        ("build", build.clone(), &a.build_args),
+        ("finalize", build, &a.build_args),
+    ];
+    lines
+        .into_iter()
+        .map(|(name, args, more)| stage_line(name, args, more))
+        .collect()
+}
+
+fn words(w: &[&str]) -> Vec<String> {
+    w.iter().map(|s| s.to_string()).collect()
+}
+
+/// A stage's line: its folders, the user's options, the global flags; checked by the parser.
+fn stage_line(name: &str, mut args: Vec<String>, more: &Option<String>) -> Result<StageLine> {
+    args.extend(extra(name, more.as_deref())?);
+    args.extend(global_flags());
+    check_line(name, &args)?;
+    Ok(StageLine {
+        name: name.into(),
+        args,
+        sharded: name != "finalize",
+    })
+}
+
+/// A stage's extra options as words; `--shard` is refused (the job sets it).
+fn extra(stage: &str, text: Option<&str>) -> Result<Vec<String>> {
+    let words = split(text.unwrap_or(""))?;
+    if words
+        .iter()
+        .any(|w| w == "--shard" || w.starts_with("--shard="))
+    {
+        let flag = if stage == "finalize" { "build" } else { stage };
+        bail!("--{flag}-args: --shard is set by the job (task I of --shards N): leave it out");
+    }
+    Ok(words)
+}
+
+/// `--overwrite` and `--allow-partial` as given to this command, for every stage.
+fn global_flags() -> Vec<String> {
+    let safety = crate::exit::safety();
+    let flags = [
+        (safety.overwrite, "--overwrite"),
+        (safety.allow_partial, "--allow-partial"),
+    ];
+    flags
+        .iter()
+        .filter(|f| f.0)
+        .map(|f| f.1.to_string())
+        .collect()
+}
+
+/// Parses a stage line as `seasonstereo` would, so a typo fails here rather than on the cluster.
+fn check_line(name: &str, args: &[String]) -> Result<()> {
+    let argv = std::iter::once("seasonstereo".to_string()).chain(args.iter().cloned());
+    match crate::Cli::try_parse_from(argv) {
+        Ok(_) => Ok(()),
+        Err(e) => {
+            let flag = if name == "finalize" { "build" } else { name };
+            let first = e.to_string();
+            let first = first
+                .lines()
+                .next()
+                .unwrap_or("")
+                .trim_start_matches("error: ");
+            bail!("the {name} stage's arguments do not parse ({first}): fix --{flag}-args")
+        }
+    }
+}
+
+/// What was submitted; with --wait, the chain's outcome.
+fn report(s: &ChainSubmitted, work: &Path) -> Result<()> {
+    let jobs: Vec<String> = s.jobs.iter().map(|(n, id)| format!("{n}={id}")).collect();
+    println!(
+        "submitted from stage {} (array tasks {}): {}; scripts and logs in {}",
+        s.first.0,
+        pipeline::jobs::status::array_spec(&s.first.1),
+        jobs.join(" "),
+        pipeline::jobs::record::jobs_dir(work).display()
+    );
+    let shown = quote(&work.display().to_string());
+    println!("follow: seasonstereo jobs status --work {shown}");
+    match s.exit {
+        None | Some(0) => Ok(()),
+        Some(c) => {
+            println!("the finalize pass did not succeed (exit code {c}):");
+            status(work, None)?;
+            bail!("the dataset chain ended (exit code {c}) with every shard done: see the finalize log in {}", pipeline::jobs::record::jobs_dir(work).join("logs").display())
+        }
+    }
+}
+
+/// Resubmits the first unfinished stage's failed shards and the later stages.
+pub fn resubmit(work: &Path, wait: bool) -> Result<()> {
+    let s = resubmit_slurm_chain(work, wait)?;
+    report(&s, work)
+}
+
+/// Per-stage shard states (only `stage`'s when given); exit code 2 naming the failed shards of
+/// the first unfinished stage, with the resubmit command.
+pub fn status(work: &Path, stage: Option<&str>) -> Result<()> {
+    let s = chain_status(work)?;
+    let shown: Vec<_> = match stage {
+        Some(name) => s.stages.iter().filter(|st| st.name == name).collect(),
+        None => s.stages.iter().collect(),
+    };
+    if shown.is_empty() {
+        let names: Vec<&str> = s.stages.iter().map(|st| st.name.as_str()).collect();
+        bail!(
+            "no stage {:?} in {}: give one of {}",
+            stage.unwrap_or(""),
+            work.display(),
+            names.join(", ")
+        );
+    }
+    println!(
+        "{}: {} chain, {} stages",
+        work.display(),
+        s.record.what,
+        s.stages.len()
+    );
+    for st in &shown {
+        let u = &st.shards;
+        println!(
+            "{:10} {} shards: {} done, {} failed, {} missing",
+            st.name,
+            u.len(),
+            u.done.len(),
+            u.failed.len(),
+            u.missing.len()
+        );
+        super::print_units(u);
+    }
+    match shown.iter().find(|st| !st.shards.complete()) {
+        None => finished(&s, stage),
+        Some(st) => super::incomplete(&st.shards, &format!("{} shards", st.name), work),
+    }
+}
+
+/// The line for a finished chain (or stage).
+fn finished(s: &ChainStatus, stage: Option<&str>) -> Result<()> {
+    match stage {
+        Some(name) => println!("every shard of {name} exited 0"),
+        None => println!("every stage of the {} chain finished", s.record.what),
+    }
+    Ok(())
+}
