@@ -252,15 +252,20 @@ pub fn resubmit(work: &Path, wait: bool) -> Result<()> {
     report(&s, work)
 }
 
-/// Per-stage shard states (only `stage`'s when given); exit code 2 naming the failed shards of
-/// the first unfinished stage, with the resubmit command.
+/// Per-stage shard states (with `stage`, that stage's and the earlier ones'); exit code 2 naming
+/// the failed shards of the first unfinished stage, with the resubmit command.
 pub fn status(work: &Path, stage: Option<&str>) -> Result<()> {
     let s = chain_status(work)?;
-    let shown: Vec<_> = match stage {
-        Some(name) => s.stages.iter().filter(|st| st.name == name).collect(),
-        None => s.stages.iter().collect(),
+    // A stage and the ones before it: a check names the first unfinished one, the root cause.
+    let upto = match stage {
+        Some(name) => s
+            .stages
+            .iter()
+            .position(|st| st.name == name)
+            .map(|k| k + 1),
+        None => Some(s.stages.len()),
     };
-    if shown.is_empty() {
+    let Some(shown) = upto.map(|k| &s.stages[..k]) else {
         let names: Vec<&str> = s.stages.iter().map(|st| st.name.as_str()).collect();
         bail!(
             "no stage {:?} in {}: give one of {}",
@@ -268,14 +273,14 @@ pub fn status(work: &Path, stage: Option<&str>) -> Result<()> {
             work.display(),
             names.join(", ")
         );
-    }
+    };
     println!(
         "{}: {} chain, {} stages",
         work.display(),
         s.record.what,
         s.stages.len()
     );
-    for st in &shown {
+    for st in shown {
         let u = &st.shards;
         println!(
             "{:10} {} shards: {} done, {} failed, {} missing",

@@ -101,8 +101,8 @@ pub struct WorkArg {
 pub struct StatusArgs {
     #[command(flatten)]
     work: WorkArg,
-    /// Dataset jobs: only this stage's shards (exit code 2 unless all exited 0); the check
-    /// steps between stages run this.
+    /// Dataset jobs: this stage's shards and the earlier stages' (exit code 2, naming the first
+    /// unfinished stage's failed shards, unless all exited 0); the check steps run this.
     #[arg(long, value_name = "NAME")]
     stage: Option<String>,
 }

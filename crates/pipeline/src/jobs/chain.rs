@@ -108,7 +108,7 @@ fn write_scripts(req: &ChainRequest, work: &Path) -> Result<ChainRecord> {
         let check = (k < last).then(|| dir.join(format!("check-{}.sh", line.name)));
         if let Some(path) = &check {
             let body = format!(
-                "# Fails (exit 2), naming them, unless every shard of {} exited 0.\nexec {binary} jobs status --work {} --stage {}\n",
+                "# Fails (exit 2), naming the failed shards and the resubmit command, unless every shard of\n# {} and of the stages before it exited 0.\nexec {binary} jobs status --work {} --stage {}\n",
                 line.name,
                 quote(&work.display().to_string()),
                 quote(&line.name)
