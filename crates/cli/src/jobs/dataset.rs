@@ -92,102 +92,84 @@ pub fn submit(a: SlurmDatasetArgs) -> Result<()> {
     report(&s, &a.work)
 }
 
+/// The stages in order: name, the option with the user's extra arguments, the line before them
+/// (`{P}` --pairs, `{R}` --raw, `{O}` --output, `{W}/x` the folder x of --work).
+const STAGES: [(&str, &str, &str); 6] = [
+    (
+        "teacher",
+        "--teacher-args",
+        "teacher --pairs {P} -o {W}/teacher",
+    ),
+    (
+        "curate",
+        "--curate-args",
+        "curate --pairs {P} --teacher {W}/teacher -o {W}/curate",
+    ),
+    (
+        "synthesize",
+        "--synthesize-args",
+        "synthesize --pairs {P} --raw {R} --selected {W}/curate/selected.txt -o {W}/synthetic",
+    ),
+    (
+        "masks",
+        "--masks-args",
+        "masks --images {W}/synthetic/cropped -o {W}/masks",
+    ),
+    ("build", "--build-args", BUILD),
+    ("finalize", "--build-args", BUILD),
+];
+
+const BUILD: &str = "dataset build --pairs {P} --selected {W}/curate/selected.txt --synthetic \
+    {W}/synthetic --masks {W}/masks --teacher {W}/teacher -o {O}";
+
 /// The six stage lines, each checked by the parser; the global flags go to every stage.
 fn stage_lines(a: &SlurmDatasetArgs) -> Result<Vec<StageLine>> {
-    let w = |sub: &str| a.work.join(sub).display().to_string();
-    let (pairs, raw, out) = (a.pairs.display(), a.raw.display(), a.output.display());
-    let (teacher, curate, synthetic) = (w("teacher"), w("curate"), w("synthetic"));
-    let (masks, selected, cropped) = (w("masks"), w("curate/selected.txt"), w("synthetic/cropped"));
-    let (pairs, raw, out) = (pairs.to_string(), raw.to_string(), out.to_string());
-    let build = words(&[
-        "dataset",
-        "build",
-        "--pairs",
-        &pairs,
-        "--selected",
-        &selected,
-        "--synthetic",
-        &synthetic,
-        "--masks",
-        &masks,
-        "--teacher",
-        &teacher,
-        "-o",
-        &out,
-    ]);
-    let lines = [
-        (
-            "teacher",
-            words(&["teacher", "--pairs", &pairs, "-o", &teacher]),
-            &a.teacher_args,
-        ),
-        (
-            "curate",
-            words(&[
-                "curate",
-                "--pairs",
-                &pairs,
-                "--teacher",
-                &teacher,
-                "-o",
-                &curate,
-            ]),
-            &a.curate_args,
-        ),
-        (
-            "synthesize",
-            words(&[
-                "synthesize",
-                "--pairs",
-                &pairs,
-                "--raw",
-                &raw,
-                "--selected",
-                &selected,
-                "-o",
-                &synthetic,
-            ]),
-            &a.synthesize_args,
-        ),
-        (
-            "masks",
-            words(&["masks", "--images", &cropped, "-o", &masks]),
-            &a.masks_args,
-        ),
-        ("build", build.clone(), &a.build_args),
-        ("finalize", build, &a.build_args),
-    ];
-    lines
-        .into_iter()
-        .map(|(name, args, more)| stage_line(name, args, more))
-        .collect()
+    let word = |w: &str| match w {
+        "{P}" => a.pairs.display().to_string(),
+        "{R}" => a.raw.display().to_string(),
+        "{O}" => a.output.display().to_string(),
+        w => match w.strip_prefix("{W}/") {
+            Some(sub) => a.work.join(sub).display().to_string(),
+            None => w.to_string(),
+        },
+    };
+    let mut lines = Vec::new();
+    for (name, flag, template) in STAGES {
+        let mut args: Vec<String> = template.split_whitespace().map(word).collect();
+        args.extend(extra(flag, extra_text(a, flag))?);
+        args.extend(global_flags());
+        check_line(name, flag, &args)?;
+        let sharded = name != "finalize";
+        let name = name.into();
+        lines.push(StageLine {
+            name,
+            args,
+            sharded,
+        });
+    }
+    Ok(lines)
 }
 
-fn words(w: &[&str]) -> Vec<String> {
-    w.iter().map(|s| s.to_string()).collect()
-}
-
-/// A stage's line: its folders, the user's options, the global flags; checked by the parser.
-fn stage_line(name: &str, mut args: Vec<String>, more: &Option<String>) -> Result<StageLine> {
-    args.extend(extra(name, more.as_deref())?);
-    args.extend(global_flags());
-    check_line(name, &args)?;
-    Ok(StageLine {
-        name: name.into(),
-        args,
-        sharded: name != "finalize",
-    })
+/// The user's text of a stage's `--<stage>-args`.
+fn extra_text<'a>(a: &'a SlurmDatasetArgs, flag: &str) -> Option<&'a str> {
+    let text = match flag {
+        "--teacher-args" => &a.teacher_args,
+        "--curate-args" => &a.curate_args,
+        "--synthesize-args" => &a.synthesize_args,
+        "--masks-args" => &a.masks_args,
+        _ => &a.build_args,
+    };
+    text.as_deref()
 }
 
 /// A stage's extra options as words; `--shard` is refused (the job sets it).
-fn extra(stage: &str, text: Option<&str>) -> Result<Vec<String>> {
+fn extra(flag: &str, text: Option<&str>) -> Result<Vec<String>> {
     let words = split(text.unwrap_or(""))?;
     if words
         .iter()
         .any(|w| w == "--shard" || w.starts_with("--shard="))
     {
-        let flag = if stage == "finalize" { "build" } else { stage };
-        bail!("--{flag}-args: --shard is set by the job (task I of --shards N): leave it out");
+        bail!("{flag}: --shard is set by the job (task I of --shards N): leave it out");
     }
     Ok(words)
 }
@@ -207,19 +189,18 @@ fn global_flags() -> Vec<String> {
 }
 
 /// Parses a stage line as `seasonstereo` would, so a typo fails here rather than on the cluster.
-fn check_line(name: &str, args: &[String]) -> Result<()> {
+fn check_line(name: &str, flag: &str, args: &[String]) -> Result<()> {
     let argv = std::iter::once("seasonstereo".to_string()).chain(args.iter().cloned());
     match crate::Cli::try_parse_from(argv) {
         Ok(_) => Ok(()),
         Err(e) => {
-            let flag = if name == "finalize" { "build" } else { name };
             let first = e.to_string();
             let first = first
                 .lines()
                 .next()
                 .unwrap_or("")
                 .trim_start_matches("error: ");
-            bail!("the {name} stage's arguments do not parse ({first}): fix --{flag}-args")
+            bail!("the {name} stage's arguments do not parse ({first}): fix {flag}")
         }
     }
 }
@@ -274,9 +255,18 @@ pub fn status(work: &Path, stage: Option<&str>) -> Result<()> {
             names.join(", ")
         );
     };
+    print_stages(&s, shown);
+    match shown.iter().find(|st| !st.shards.complete()) {
+        None => finished(&s, stage),
+        Some(st) => super::incomplete(&st.shards, &format!("{} shards", st.name), work),
+    }
+}
+
+/// One line per stage of `shown`, then one per failed or missing shard.
+fn print_stages(s: &ChainStatus, shown: &[seasonstereo::StageStatus]) {
     println!(
         "{}: {} chain, {} stages",
-        work.display(),
+        s.work.display(),
         s.record.what,
         s.stages.len()
     );
@@ -291,10 +281,6 @@ pub fn status(work: &Path, stage: Option<&str>) -> Result<()> {
             u.missing.len()
         );
         super::print_units(u);
-    }
-    match shown.iter().find(|st| !st.shards.complete()) {
-        None => finished(&s, stage),
-        Some(st) => super::incomplete(&st.shards, &format!("{} shards", st.name), work),
     }
 }
 
