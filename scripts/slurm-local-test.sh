@@ -3,8 +3,12 @@
 # reconstruct` (a path with a space, an extra option passed through), byte-identical to a local
 # `reconstruct`; then a damaged image: the merge refuses (exit 3), `jobs status` names the failed
 # tiles, and `jobs resubmit` of only those completes the DSM, identical again.
+# `--dataset`: the training-set chain instead (`jobs slurm dataset` on procedural worlds' sources,
+# 2 shards per stage), then a failed teacher shard: the check names it, the later stages are
+# cancelled, `jobs resubmit` of only that shard completes the set, with the same lists.
 #
-# Usage: scripts/slurm-local-test.sh [SIZE (default 4096)]   — needs sbatch on PATH and a running
+# Usage: scripts/slurm-local-test.sh [--setup] [--dataset] [SIZE (default 4096; 256 with
+# --dataset)]   — needs sbatch on PATH and a running
 # cluster whose nodes see this folder. `--setup` first configures a one-node cluster on this
 # machine (Debian/Ubuntu, root: apt-get install -y slurm-wlm; munge, slurmctld, slurmd).
 set -euo pipefail
@@ -37,9 +41,36 @@ CONF
     sleep 3; sinfo
 fi
 command -v sbatch >/dev/null || { echo "no sbatch on PATH: nothing to test"; exit 0; }
-SIZE=${1:-4096}
 T=$(mktemp -d "$PWD/slurm test XXXX")   # a path with a space, on a file system the node sees
 trap 'rm -rf "$T"' EXIT
+
+if [[ ${1:-} == --dataset ]]; then
+    "$BIN" dataset world --size "${2:-256}" --worlds 4 -o "$T/world set" >/dev/null
+    src="$T/world set/sources/train"
+    args=(--pairs "$src/pairs" --raw "$src/raw" --shards 2 --curate-args "--keep 100%"
+          --build-args "--teacher-name 'sgm x'" --sbatch-args "--mem=2G")
+    /usr/bin/time -f "jobs slurm dataset: %e s" "$BIN" jobs slurm dataset "${args[@]}" \
+        --work "$T/work" -o "$T/set" --wait
+    [[ -f "$T/set/manifest.json" && -d "$T/set/disparity_maps/sgm x" ]] && echo "PASS: training set"
+    first=$(ls "$src/pairs/L" | sort | head -1)
+    mkdir -p "$T/work2/teacher/${first%.*}.iio/x"   # teacher shard 0 cannot write its first pair
+    set +e
+    /usr/bin/time -f "failing chain: %e s" "$BIN" jobs slurm dataset "${args[@]}" \
+        --work "$T/work2" -o "$T/set2" --wait; rc=$?
+    set -e
+    echo "exit with a failed teacher shard: $rc (expected 2)"; [[ $rc == 2 ]]
+    scontrol show job 2>/dev/null | grep -oE "JobName=ss-[a-z-]+|JobState=[A-Z]+|Reason=[A-Za-z]+" \
+        | paste - - - | tail -12 || true
+    cat "$T/work2/jobs/logs/check-teacher-"*.log
+    rm -rf "$T/work2/teacher/${first%.*}.iio"
+    /usr/bin/time -f "resubmit: %e s" "$BIN" jobs resubmit --work "$T/work2" --wait
+    for f in sub1_synchronic sub2_synchronic sub5_syndiach sub3_diachronic; do
+        cmp "$T/set/experiments/$f.csv" "$T/set2/experiments/$f.csv"
+    done
+    echo "PASS: resubmitted the failed shard; same lists"
+    exit 0
+fi
+SIZE=${1:-4096}
 W="$T/world"
 "$BIN" world --size "$SIZE" --seed 3 --raw -o "$W" >/dev/null
 args=("$W/raw/WORLD_3_A.tif" "$W/raw/WORLD_3_B.tif" --rpc-left "$W/rpc/WORLD_3_A.json"

@@ -4,8 +4,8 @@
 //! with spaces, `--sbatch-args`), the array size, the `afterany` merge, the DSM byte-identical to
 //! a local `reconstruct`, a failed tile named by `jobs status` (exit 2) and the merge refusing it
 //! (exit 3), and `jobs resubmit` sending only the failed tasks. The fake honours dependencies:
-//! a job `afterok` on a failed one is cancelled with `--kill-on-invalid-dep=yes` and logged as
-//! pending for ever without. `jobs slurm dataset`: the stages' arguments passed through (spaces,
+//! a job `afterok` on a failed one is cancelled with `--kill-on-invalid-dep=yes` (and, like
+//! Slurm 22.05, `sbatch --wait` on it exits 0) and logged as pending for ever without. `jobs slurm dataset`: the stages' arguments passed through (spaces,
 //! quotes), arrays of --shards tasks, `afterany` checks, a failed teacher shard named by the
 //! check step with the resubmit command and the rest of the chain cancelled, and `jobs resubmit`
 //! sending exactly that shard, then the later stages, to the same training set.
@@ -21,7 +21,7 @@ for a in "$@"; do case "$a" in --array=*) array=${a#--array=};; --wait) wait=1;;
 case "$dep" in afterok:*)
   if [ "$(cat "$log.exit.${dep#afterok:}")" != 0 ]; then
     echo 1 > "$log.exit.$n"; echo "$n"
-    if [ $kill = 1 ]; then echo "job $n cancelled (dependency never satisfied)" >> "$log"; [ $wait = 1 ] && exit 1; exit 0; fi
+    if [ $kill = 1 ]; then echo "job $n cancelled (dependency never satisfied)" >> "$log"; exit 0; fi
     echo "job $n pending for ever (DependencyNeverSatisfied)" >> "$log"; exit 0
   fi;;
 esac

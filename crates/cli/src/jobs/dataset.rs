@@ -218,12 +218,26 @@ fn report(s: &ChainSubmitted, work: &Path) -> Result<()> {
     let shown = quote(&work.display().to_string());
     println!("follow: seasonstereo jobs status --work {shown}");
     match s.exit {
-        None | Some(0) => Ok(()),
-        Some(c) => {
-            println!("the finalize pass did not succeed (exit code {c}):");
-            status(work, None)?;
-            bail!("the dataset chain ended (exit code {c}) with every shard done: see the finalize log in {}", pipeline::jobs::record::jobs_dir(work).join("logs").display())
-        }
+        None => Ok(()),
+        Some(code) => outcome(code, work),
+    }
+}
+
+/// After --wait: the shard markers, not `sbatch --wait`'s exit code alone, say whether the chain
+/// finished (Slurm 22.05's `sbatch --wait` exits 0 for a job cancelled by its dependency).
+fn outcome(code: i32, work: &Path) -> Result<()> {
+    if chain_status(work)?.first_incomplete().is_some() {
+        println!("the chain did not finish (finalize exit code {code}):");
+        return status(work, None);
+    }
+    match code {
+        0 => Ok(()),
+        c => bail!(
+            "every shard finished but the finalize job exited {c}: see its log in {}",
+            pipeline::jobs::record::jobs_dir(work)
+                .join("logs")
+                .display()
+        ),
     }
 }
 
