@@ -87,66 +87,13 @@ fn write_scripts(req: &ChainRequest, work: &Path) -> Result<ChainRecord> {
     let dir = jobs_dir(work);
     std::fs::create_dir_all(dir.join("logs"))
         .with_context(|| format!("creating {} (is --work writable?)", dir.display()))?;
-    let binary = quote(&req.binary.display().to_string());
     let last = req.stages.len() - 1;
-    let mut stages = Vec::new();
-    for (k, line) in req.stages.iter().enumerate() {
-        let shards = if line.sharded { req.shards } else { 1 };
-        let markers = marker_dir(work, &line.name);
-        std::fs::create_dir_all(&markers)
-            .with_context(|| format!("creating {}", markers.display()))?;
-        let script = dir.join(format!("{}.sh", line.name));
-        let what = format!("stage {} of the {} chain", line.name, req.what);
-        let run = format!("{binary} {}", join(&line.args));
-        write_script(
-            &script,
-            "jobs slurm",
-            &what,
-            &req.cwd,
-            &task_body(&run, &markers, shards, line.sharded),
-        )?;
-        let check = (k < last).then(|| dir.join(format!("check-{}.sh", line.name)));
-        if let Some(path) = &check {
-            let body = format!(
-                "# Fails (exit 2), naming the failed shards and the resubmit command, unless every shard of\n# {} and of the stages before it exited 0.\nexec {binary} jobs status --work {} --stage {}\n",
-                line.name,
-                quote(&work.display().to_string()),
-                quote(&line.name)
-            );
-            write_script(
-                path,
-                "jobs slurm",
-                &format!("the check of {what}"),
-                &req.cwd,
-                &body,
-            )?;
-        }
-        let log = |name: &str, pattern: &str| {
-            let mut v = vec![
-                format!("--job-name=ss-{name}"),
-                format!(
-                    "--output={}",
-                    dir.join("logs")
-                        .join(format!("{name}-{pattern}.log"))
-                        .display()
-                ),
-            ];
-            v.extend(req.sbatch_args.iter().cloned());
-            v
-        };
-        let pattern = if line.sharded { "%A_%a" } else { "%j" };
-        let mut check_sbatch = log(&format!("check-{}", line.name), "%j");
-        check_sbatch.splice(1..1, ["--cpus-per-task=1".to_string(), "--mem=256M".into()]);
-        stages.push(StageJob {
-            name: line.name.clone(),
-            shards,
-            sharded: line.sharded,
-            script,
-            check,
-            sbatch: log(&line.name, pattern),
-            check_sbatch,
-        });
-    }
+    let stages = req
+        .stages
+        .iter()
+        .enumerate()
+        .map(|(k, line)| write_stage(req, work, line, k < last))
+        .collect::<Result<Vec<_>>>()?;
     let record = ChainRecord {
         what: req.what.clone(),
         stages,
@@ -154,6 +101,63 @@ fn write_scripts(req: &ChainRequest, work: &Path) -> Result<ChainRecord> {
     };
     record.write(work)?;
     Ok(record)
+}
+
+/// One stage's task script, its check script (`checked`: every stage but the last) and sbatch
+/// options.
+fn write_stage(
+    req: &ChainRequest,
+    work: &Path,
+    line: &StageLine,
+    checked: bool,
+) -> Result<StageJob> {
+    let dir = jobs_dir(work);
+    let binary = quote(&req.binary.display().to_string());
+    let shards = if line.sharded { req.shards } else { 1 };
+    let markers = marker_dir(work, &line.name);
+    std::fs::create_dir_all(&markers).with_context(|| format!("creating {}", markers.display()))?;
+    let script = dir.join(format!("{}.sh", line.name));
+    let what = format!("stage {} of the {} chain", line.name, req.what);
+    let run = format!("{binary} {}", join(&line.args));
+    let body = task_body(&run, &markers, shards, line.sharded);
+    write_script(&script, "jobs slurm", &what, &req.cwd, &body)?;
+    let check = checked.then(|| dir.join(format!("check-{}.sh", line.name)));
+    if let Some(path) = &check {
+        let body = format!(
+            "# Fails (exit 2), naming the failed shards and the resubmit command, unless every \
+             shard of\n# {} and of the stages before it exited 0.\nexec {binary} jobs status \
+             --work {} --stage {}\n",
+            line.name,
+            quote(&work.display().to_string()),
+            quote(&line.name)
+        );
+        write_script(
+            path,
+            "jobs slurm",
+            &format!("the check of {what}"),
+            &req.cwd,
+            &body,
+        )?;
+    }
+    let options = |name: &str, pattern: &str, ours: &[&str]| {
+        let log = dir.join("logs").join(format!("{name}-{pattern}.log"));
+        let mut v = vec![format!("--job-name=ss-{name}")];
+        v.extend(ours.iter().map(|o| o.to_string()));
+        v.push(format!("--output={}", log.display()));
+        v.extend(req.sbatch_args.iter().cloned());
+        v
+    };
+    let pattern = if line.sharded { "%A_%a" } else { "%j" };
+    let check_name = format!("check-{}", line.name);
+    Ok(StageJob {
+        name: line.name.clone(),
+        shards,
+        sharded: line.sharded,
+        script,
+        check,
+        sbatch: options(&line.name, pattern, &[]),
+        check_sbatch: options(&check_name, "%j", &["--cpus-per-task=1", "--mem=256M"]),
+    })
 }
 
 /// A stage task: clears its marker, runs the stage (its shard), leaves its exit code in the
