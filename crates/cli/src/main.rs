@@ -115,7 +115,9 @@ enum Command {
     /// saves and exits.
     Train(train::TrainArgs),
     /// Cluster jobs: `jobs slurm reconstruct <reconstruct arguments>` submits a scene as a
-    /// Slurm array of tile tasks plus a merge; `jobs status` and `jobs resubmit` follow it up.
+    /// Slurm array of tile tasks plus a merge; `jobs slurm dataset` the training-set stages as
+    /// one array per stage with a check between stages; `jobs status` and `jobs resubmit`
+    /// follow either up.
     Jobs(jobs::JobsArgs),
 }
 

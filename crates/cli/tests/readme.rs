@@ -53,6 +53,18 @@ const PLANS: &[(&str, Plan)] = &[
         "seasonstereo jobs resubmit --work dsm_work",
         Skip("follows the Slurm submission above"),
     ),
+    (
+        "seasonstereo jobs slurm dataset --pairs data/synchronic_only",
+        Skip("needs a Slurm cluster and the release's pairs: tests/jobs.rs runs the chain on worlds against a fake sbatch"),
+    ),
+    (
+        "seasonstereo jobs status --work work",
+        Skip("follows the Slurm dataset submission above"),
+    ),
+    (
+        "seasonstereo jobs resubmit --work work",
+        Skip("follows the Slurm dataset submission above"),
+    ),
     ("seasonstereo world --size 512 --seed 1 -o out/world", Run),
     (
         "seasonstereo world --size 4096",

@@ -43,7 +43,7 @@ impl SlurmRecord {
         read_json(&path)?.with_context(|| {
             format!(
                 "{} does not exist: {} was not submitted by `seasonstereo jobs slurm \
-                 reconstruct` (give the --work folder of that command)",
+                 reconstruct` or `jobs slurm dataset` (give the --work folder of that command)",
                 path.display(),
                 work.display()
             )
