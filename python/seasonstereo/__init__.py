@@ -157,8 +157,8 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     reconstruct`` with the same options and defaults (underscores for dashes): ``like``,
     ``truth``, ``resolution``, ``epsg``, ``gridding``, ``fill_holes``, ``median_filter``,
     ``roi``, ``roi_lonlat``, ``alt_range``, ``tile``, ``collar``, ``max_memory`` (GiB),
-    ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates`` and the matcher's options
-    of :func:`predict`. Returns the tiles (``failed`` ones included: the DSM holds the others),
+    ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates``, ``threads`` (this call's
+    worker threads; default every core) and the matcher's options of :func:`predict`. Returns the tiles (``failed`` ones included: the DSM holds the others),
     the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds`` and the
     ``warnings`` the command prints (also issued as Python warnings).
 
@@ -185,8 +185,8 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
     the command's defaults: ``pairs``, ``dry_run`` (choose the pairs, write nothing),
     ``cluster_tolerance``, ``min_support``, ``register``, ``fill_holes``, ``median_filter``,
     ``pair_median_filter``, ``work``, ``like``, ``resolution``, ``epsg``, ``truth``,
-    ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB) and the matcher's
-    options of :func:`predict`.
+    ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
+    call's worker threads; default every core) and the matcher's options of :func:`predict`.
 
     Returns the report's content: ``views``, ``candidates``, ``chosen`` (pairs with their score
     ``terms``), ``pairs`` (each pair's status, DSM, coverage, scores, seconds), ``fused`` (files,

@@ -93,6 +93,7 @@ def reconstruct(
     shard: Optional[str] = None,
     merge: Optional[bool] = None,
     keep_intermediates: Optional[bool] = None,
+    threads: Optional[int] = None,
     **matcher: Any,
 ) -> dict[str, Any]: ...
 def reconstruct_many(
@@ -121,5 +122,6 @@ def reconstruct_many(
     tile: Optional[int] = None,
     collar: Optional[int] = None,
     max_memory: Optional[float] = None,
+    threads: Optional[int] = None,
     **matcher: Any,
 ) -> dict[str, Any]: ...

@@ -7,6 +7,7 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use seasonstereo::flags::{self, ClassicalFlags};
+use seasonstereo::Gridding;
 
 use crate::errors::{exception, value_error};
 
@@ -75,5 +76,46 @@ impl<'py> Keywords<'py> {
             speckle: self.take("speckle")?.unwrap_or(d.speckle),
             speckle_diff: self.take("speckle_diff")?.unwrap_or(d.speckle_diff),
         })
+    }
+
+    /// `threads`: the worker threads of this call (default: every core, shared by all calls).
+    pub fn threads(&self) -> PyResult<Option<usize>> {
+        self.take("threads")
+    }
+
+    /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none) over
+    /// the given defaults: how a DSM is made from its points, in every command that makes one.
+    pub fn finishing(
+        &self,
+        gridding: &mut Gridding,
+        fill_holes: &mut Option<usize>,
+        median_filter: &mut Option<usize>,
+    ) -> PyResult<()> {
+        if let Some(g) = self.take::<String>("gridding")? {
+            *gridding = flags::gridding(&g).map_err(exception)?;
+        }
+        if let Some(cells) = self.take("fill_holes")? {
+            *fill_holes = flags::fill_cells(cells);
+        }
+        if let Some(cells) = self.take("median_filter")? {
+            *median_filter = flags::median_cells(cells);
+        }
+        Ok(())
+    }
+
+    /// `tile`, `collar` (pixels) and `max_memory` (GiB) over the given defaults: the tiling of
+    /// every command that runs tiles.
+    pub fn tiling(
+        &self,
+        tile: &mut usize,
+        collar: &mut usize,
+        max_memory: &mut u64,
+    ) -> PyResult<()> {
+        *tile = self.take("tile")?.unwrap_or(*tile);
+        *collar = self.take("collar")?.unwrap_or(*collar);
+        if let Some(gib) = self.take("max_memory")? {
+            *max_memory = flags::memory_bytes(gib).map_err(exception)?;
+        }
+        Ok(())
     }
 }

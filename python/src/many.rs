@@ -18,7 +18,8 @@ use crate::values::{crs, to_python, transform};
 /// Chooses the best pairs of `images` (two or more; cameras `<stem>.json` in `rpc_dir`, else
 /// the images' RPC tags), reconstructs each and fuses them into `out`; returns the summary the
 /// report holds (chosen pairs with their score terms, per-pair outcomes, the fused DSM's files,
-/// grid and coverage, scores, seconds) and the warnings (incomplete pairs).
+/// grid and coverage, scores, seconds) and the warnings (incomplete pairs). `threads`: this
+/// call's worker threads (default: every core, shared by all calls).
 #[pyfunction]
 #[pyo3(signature = (images, rpc_dir=None, *, out, method="mgm", overwrite=false, progress=None, **options))]
 #[allow(clippy::too_many_arguments)] // Python's keywords
@@ -34,11 +35,14 @@ pub fn reconstruct_many(
 ) -> PyResult<PyObject> {
     let keywords = Keywords::new(py, options)?;
     let mut options = many_options(&keywords, method, images, rpc_dir, out)?;
+    let threads = keywords.threads()?;
     keywords.finish()?;
     options.overwrite = overwrite;
     let callback = Callback::new(progress);
     let result = compute(py, || {
-        let s = seasonstereo::reconstruct_many(&options, &callback)?;
+        let s = seasonstereo::with_threads(threads, || {
+            seasonstereo::reconstruct_many(&options, &callback)
+        })?;
         s.check_produced()?;
         Ok(s)
     });
@@ -61,25 +65,13 @@ fn many_options(
     o.cluster_tolerance = k.take("cluster_tolerance")?.unwrap_or(o.cluster_tolerance);
     o.min_support = k.take("min_support")?;
     o.co_register = k.take("register")?.unwrap_or(false);
-    if let Some(cells) = k.take("fill_holes")? {
-        o.fill_holes = flags::fill_cells(cells);
-    }
-    if let Some(cells) = k.take("median_filter")? {
-        o.median_filter = flags::median_cells(cells);
-    }
+    k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
     if let Some(cells) = k.take("pair_median_filter")? {
         o.pair_median_filter = flags::median_cells(cells);
     }
     o.truth = k.path("truth")?;
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
-    if let Some(g) = k.take::<String>("gridding")? {
-        o.gridding = flags::gridding(&g).map_err(exception)?;
-    }
-    o.tile = k.take("tile")?.unwrap_or(o.tile);
-    o.collar = k.take("collar")?.unwrap_or(o.collar);
-    if let Some(gib) = k.take("max_memory")? {
-        o.max_memory = flags::memory_bytes(gib).map_err(exception)?;
-    }
+    k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
     Ok(o)
 }
 

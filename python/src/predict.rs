@@ -27,7 +27,7 @@ pub fn predict<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let keywords = Keywords::new(py, options)?;
     let matcher = keywords.classical(method)?.matcher().map_err(exception)?;
-    let threads = keywords.take("threads")?;
+    let threads = keywords.threads()?;
     keywords.finish()?;
     let (left, right) = (left.to_image()?, right.to_image()?);
     let range = RangeSource::flag_or_estimate(disparity_range.map(|[lo, hi]| (lo, hi)));

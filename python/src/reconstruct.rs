@@ -16,7 +16,8 @@ use crate::values::{reconstruct_summary, to_python};
 /// tiles, the DSM's grid (`transform`, `crs`) and coverage, the scores (with `truth`), each
 /// step's time in seconds and the warnings (failed tiles, suspect cameras). An existing `out`
 /// is replaced only with `overwrite` or when it is the product of this work folder's earlier
-/// run (resumed), as on the command line.
+/// run (resumed), as on the command line. `threads`: this call's worker threads (default: every
+/// core, shared by all calls).
 #[pyfunction]
 #[pyo3(signature = (left, right, *, out, method="mgm", overwrite=false, progress=None, **options))]
 #[allow(clippy::too_many_arguments)] // Python's keywords
@@ -32,11 +33,12 @@ pub fn reconstruct(
 ) -> PyResult<PyObject> {
     let keywords = Keywords::new(py, options)?;
     let options = reconstruct_options(&keywords, method, [left, right], out)?;
+    let threads = keywords.threads()?;
     keywords.finish()?;
     let callback = Callback::new(progress);
     let result = compute(py, || {
         options.check_output(overwrite)?;
-        seasonstereo::reconstruct(&options, &callback)
+        seasonstereo::with_threads(threads, || seasonstereo::reconstruct(&options, &callback))
     });
     to_python(
         py,
@@ -62,8 +64,9 @@ fn reconstruct_options(
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
     o.work_dir = k.path("work")?;
     o.truth = k.path("truth")?;
-    dsm_keywords(k, &mut o)?;
-    tiling_keywords(k, &mut o)?;
+    k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
+    k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
+    shard_keywords(k, &mut o)?;
     Ok(o)
 }
 
@@ -79,27 +82,8 @@ pub fn grid(k: &Keywords<'_>) -> PyResult<GridChoice> {
     ))
 }
 
-/// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none).
-fn dsm_keywords(k: &Keywords<'_>, o: &mut ReconstructOptions) -> PyResult<()> {
-    if let Some(g) = k.take::<String>("gridding")? {
-        o.gridding = flags::gridding(&g).map_err(exception)?;
-    }
-    if let Some(cells) = k.take("fill_holes")? {
-        o.fill_holes = flags::fill_cells(cells);
-    }
-    if let Some(cells) = k.take("median_filter")? {
-        o.median_filter = flags::median_cells(cells);
-    }
-    Ok(())
-}
-
-/// `tile`, `collar` (pixels), `max_memory` (GiB), `shard` ("I/N"), `merge`, `keep_intermediates`.
-fn tiling_keywords(k: &Keywords<'_>, o: &mut ReconstructOptions) -> PyResult<()> {
-    o.tile = k.take("tile")?.unwrap_or(o.tile);
-    o.collar = k.take("collar")?.unwrap_or(o.collar);
-    if let Some(gib) = k.take("max_memory")? {
-        o.max_memory = flags::memory_bytes(gib).map_err(exception)?;
-    }
+/// `shard` ("I/N"), `merge`, `keep_intermediates`: how this call takes part in a sharded run.
+fn shard_keywords(k: &Keywords<'_>, o: &mut ReconstructOptions) -> PyResult<()> {
     if let Some(shard) = k.take::<String>("shard")? {
         o.shard = shard.parse::<Shard>().map_err(value_error)?;
     }

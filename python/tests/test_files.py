@@ -29,6 +29,20 @@ def test_rectify_writes_what_the_command_line_writes(dev, rectified, tmp_path):
         assert filecmp.cmp(s[key], rectified[key], shallow=False), key
 
 
+def test_a_camera_can_be_a_geotiff_carrying_the_rpc_tag(dev, cli, tmp_path):
+    """The dev images carry their original RPCs in tag 50844: given as the camera files, they
+    rectify exactly as the command line does reading each image's own tag."""
+    left, right, _, _ = images(dev)
+    said = run_cli(cli, "rectify", left, right, "-o", tmp_path / "cli", "--stem", "pair",
+                   "--alt-range=-27:30")
+    s = seasonstereo.rectify(left, right, tmp_path / "py", rpc_left=left, rpc_right=right,
+                             stem="pair", alt_range=(-27, 30))
+    assert f"disparity range {s['disparity_range'][0]}:{s['disparity_range'][1]} px" in said
+    for folder, suffix in (("L", "iio"), ("R", "iio"), ("homography", "npz")):
+        assert filecmp.cmp(tmp_path / "cli" / folder / f"pair.{suffix}",
+                           tmp_path / "py" / folder / f"pair.{suffix}", shallow=False), folder
+
+
 def test_dsm_writes_what_the_command_line_writes(dev, cli, rectified, tmp_path):
     _, _, rpc_left, rpc_right = images(dev)
     lo, hi = rectified["range"]

@@ -37,11 +37,13 @@ pub struct ReconstructArgs {
     /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height.
     #[arg(short, long)]
     output: PathBuf,
-    /// Left camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
-    #[arg(long, value_name = "JSON")]
+    /// Left camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
+    /// GeoTIFF carrying the RPC tag 50844.
+    #[arg(long, value_name = "CAMERA")]
     rpc_left: Option<PathBuf>,
-    /// Right camera as SatNeRF/rpcm JSON.
-    #[arg(long, value_name = "JSON")]
+    /// Right camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
+    /// GeoTIFF carrying the RPC tag 50844.
+    #[arg(long, value_name = "CAMERA")]
     rpc_right: Option<PathBuf>,
     /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
     #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi, conflicts_with = "roi_lonlat")]

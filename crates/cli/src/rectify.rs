@@ -28,11 +28,13 @@ pub struct RectifyArgs {
     /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
     #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi)]
     roi: Option<camera::rectify::Roi>,
-    /// Left camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
-    #[arg(long, value_name = "JSON")]
+    /// Left camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
+    /// GeoTIFF carrying the RPC tag 50844.
+    #[arg(long, value_name = "CAMERA")]
     rpc_left: Option<PathBuf>,
-    /// Right camera as SatNeRF/rpcm JSON (instead of the TIFF's RPC tag).
-    #[arg(long, value_name = "JSON")]
+    /// Right camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
+    /// GeoTIFF carrying the RPC tag 50844.
+    #[arg(long, value_name = "CAMERA")]
     rpc_right: Option<PathBuf>,
     /// Altitudes of the scene MIN:MAX, metres; the disparity range is derived from it. Default:
     /// min_alt/max_alt of the JSON cameras, else the RPCs' altitude offset ± scale (often

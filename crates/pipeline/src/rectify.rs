@@ -95,20 +95,23 @@ fn read_raw(path: &Path, which: &str) -> Result<(Image, Option<RpcModel>)> {
     Ok((image, raw.rpc))
 }
 
-/// The camera of one view: the JSON when given, else the TIFF tag.
+/// The camera of one view: the given camera file when there is one (a SatNeRF/rpcm JSON, or a
+/// GeoTIFF carrying the RPC tag, e.g. the original image beside a resampled one), else the
+/// image's own tag.
 pub(crate) fn camera_of(
     image_path: &Path,
     tag: Option<RpcModel>,
-    json: Option<&Path>,
+    camera: Option<&Path>,
     which: &str,
 ) -> Result<RpcModel> {
-    match (json, tag) {
-        (Some(j), _) => RpcModel::read_rpcm_json(j)
-            .with_context(|| format!("reading the {which} RPC {}", j.display())),
+    match (camera, tag) {
+        (Some(path), _) => {
+            crate::dsm::read_camera(path).with_context(|| format!("the {which} camera"))
+        }
         (None, Some(rpc)) => Ok(rpc),
         (None, None) => bail!(
             "{}: no RPC camera (the image has no RPC tag 50844); pass --rpc-{which} with its \
-             SatNeRF/rpcm JSON",
+             SatNeRF/rpcm JSON (or a GeoTIFF carrying the tag)",
             image_path.display()
         ),
     }
