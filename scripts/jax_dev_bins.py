@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Tables of scripts/jax-dev-all-pairs.sh: every pair's tags and scores (OUT/pairs.tsv) and the
 means per bin (near-synchronic <= 30 days / cross-season > 30 days x narrow / wide baseline, split
-at the median disparity range) as Markdown on stdout, plus a "very-narrow" row (disparity range
-< VERY_NARROW_PX, either date gap) where the held-out narrow-baseline pairs live.
+at the median disparity range) as Markdown on stdout, plus a "very-narrow" row (under
+VERY_NARROW_PX_PER_M pixels of disparity per metre of altitude, either date gap) where the
+held-out narrow-baseline pairs live.
 
     python3 scripts/jax_dev_bins.py DATA_DIR OUT
 """
@@ -16,9 +17,11 @@ import sys
 from datetime import datetime
 
 NEAR_DAYS = 30
-# Held-out pairs have disparity ranges of 45-55 px (1 px ~ 1 m of height); the dev pairs below this
-# width are the closest to them, so they get their own row on top of the four bins.
-VERY_NARROW_PX = 110
+# Held-out pairs have disparity ranges of 45-55 px; on the dev pairs a range that narrow goes with
+# 0.2-0.5 px of disparity per metre of altitude (the range is mostly the disparity's drift across
+# the frame, not the relief). The dev pairs under this slope (>= 1.5 m of height per pixel) are the
+# closest to them, so they get their own row on top of the four bins.
+VERY_NARROW_PX_PER_M = 0.65
 
 
 def camera(data, ident):
@@ -40,18 +43,22 @@ def sun_angle(a, b):
     return math.degrees(math.acos(dot))
 
 
-def disparity_span(work):
-    """Width of the union of the tiles' disparity ranges, pixels."""
-    lo, hi = None, None
+def baseline(work):
+    """Width of the union of the tiles' disparity ranges in raw pixels (a stretched tile's range
+    divided by its stretch), and the tiles' mean disparity per metre of altitude (raw pixels)."""
+    lo, hi, slopes = None, None, []
     for path in glob.glob(os.path.join(work, "tiles", "*.json")):
         with open(path) as f:
-            r = json.load(f).get("disparity_range")
+            record = json.load(f)
+        r, stretch = record.get("disparity_range"), record.get("stretch") or 1.0
         if r:
-            lo = r[0] if lo is None else min(lo, r[0])
-            hi = r[1] if hi is None else max(hi, r[1])
-    if lo is None:
-        sys.exit(f"{work}/tiles: no tile record with a disparity range; rerun the pair")
-    return hi - lo
+            lo = r[0] / stretch if lo is None else min(lo, r[0] / stretch)
+            hi = r[1] / stretch if hi is None else max(hi, r[1] / stretch)
+        if record.get("pixels_per_metre"):
+            slopes.append(record["pixels_per_metre"])
+    if lo is None or not slopes:
+        sys.exit(f"{work}/tiles: no tile record with a disparity range and slope; rerun the pair")
+    return round(hi - lo), sum(slopes) / len(slopes)
 
 
 def pair_row(data, out, pair):
@@ -60,11 +67,13 @@ def pair_row(data, out, pair):
     with open(os.path.join(out, f"{pair}.score.json")) as f:
         rec = json.loads(f.readline())
     ours = rec.get("ours", rec)
+    span, slope = baseline(os.path.join(out, f"{pair}_work"))
     row = {
         "pair": pair,
         "days": abs((t1 - t0).total_seconds()) / 86400.0,
         "sun_deg": sun_angle(sun0, sun1),
-        "disp_px": disparity_span(os.path.join(out, f"{pair}_work")),
+        "disp_px": span,
+        "px_per_m": slope,
         "mae": ours["mae_filtered"],
         "coverage": ours["coverage"],
         "within_1m": ours["within_1m"],
@@ -92,7 +101,7 @@ def in_view(row, view):
     if view == "all":
         return True
     if view == "very-narrow":
-        return row["disp_px"] < VERY_NARROW_PX
+        return row["px_per_m"] < VERY_NARROW_PX_PER_M
     return row["bin"] == view
 
 
@@ -123,8 +132,8 @@ def main():
         for r in rows:
             f.write("\t".join(fmt(r.get(k)) for k in keys) + "\n")
     print(f"{len(rows)} pairs; baseline split at the median disparity range, {split:g} px\n")
-    print("| bin | pairs | days | sun Δ° | disparity px | MAE m | coverage % | within 1 m % | within 2 m % | s per pair |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| bin | pairs | days | sun Δ° | disparity px | px per m | MAE m | coverage % | within 1 m % | within 2 m % | s per pair |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     bins = ["near-narrow", "near-wide", "cross-narrow", "cross-wide"]
     for b in bins + ["very-narrow", "all"]:
         sel = [r for r in rows if in_view(r, b)]
@@ -132,7 +141,7 @@ def main():
             continue
         print(
             f"| {b} | {len(sel)} | {mean(sel, 'days'):.0f} | {mean(sel, 'sun_deg'):.1f} | "
-            f"{mean(sel, 'disp_px'):.0f} | {mean(sel, 'mae'):.3f} | {100 * mean(sel, 'coverage'):.1f} | "
+            f"{mean(sel, 'disp_px'):.0f} | {mean(sel, 'px_per_m'):.2f} | {mean(sel, 'mae'):.3f} | {100 * mean(sel, 'coverage'):.1f} | "
             f"{100 * mean(sel, 'within_1m'):.1f} | {100 * mean(sel, 'within_2m'):.1f} | {mean(sel, 'seconds'):.1f} |"
         )
     s2p = [r for r in rows if "s2p_mae" in r]

@@ -423,6 +423,39 @@ pub struct Rectification {
     pub max_row_error: f64,
     /// Disparity per metre of altitude, pixels (positive).
     pub pixels_per_metre: f64,
+    /// How many times the frame is stretched along the rows ([`Rectification::stretched`]; 1:
+    /// not stretched): one rectified pixel along a row is `1 / stretch` raw pixels.
+    pub stretch: f64,
+}
+
+impl Rectification {
+    /// The same rectification with the rectified frame stretched `zoom` times along the rows
+    /// (epipolar lines): disparities come in steps of `1 / zoom` raw pixels, which keeps the
+    /// height per disparity step small on narrow baselines. Rows are unchanged.
+    pub fn stretched(&self, zoom: f64) -> Rectification {
+        let s = Homography([[zoom, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+        let (lo, hi) = self.disparity_range;
+        let (x, y, w, h) = self.roi_in_frame;
+        Rectification {
+            h_left: s.compose(&self.h_left),
+            h_right: s.compose(&self.h_right),
+            disparity_range: (
+                ((lo as f64 * zoom).floor() as i32).max(1),
+                (hi as f64 * zoom).ceil() as i32,
+            ),
+            size: ((self.size.0 as f64 * zoom).ceil() as usize, self.size.1),
+            roi_in_frame: (
+                (x as f64 * zoom).floor() as usize,
+                y,
+                (w as f64 * zoom).ceil() as usize,
+                h,
+            ),
+            flipped: self.flipped,
+            max_row_error: self.max_row_error,
+            pixels_per_metre: self.pixels_per_metre * zoom,
+            stretch: self.stretch * zoom,
+        }
+    }
 }
 
 /// The inclusive integer disparity range `[floor(min) − 1, ceil(max) + 1]` of the camera matches
@@ -560,6 +593,7 @@ pub fn rectifying_homographies(
         flipped,
         max_row_error,
         pixels_per_metre: slope.abs(),
+        stretch: 1.0,
     })
 }
 

@@ -207,6 +207,28 @@ fn homographies_align_rows_and_make_disparity_grow_with_altitude() {
 }
 
 #[test]
+fn a_stretched_rectification_multiplies_disparities_and_keeps_rows() {
+    for (name, l, r) in pairs() {
+        let rect = rectification(&l, &r, ROI, ALT).unwrap();
+        let wide = rect.stretched(2.0);
+        let (lo, hi) = wide.disparity_range;
+        assert_eq!(wide.size, (2 * rect.size.0, rect.size.1), "{name}");
+        assert!((wide.pixels_per_metre - 2.0 * rect.pixels_per_metre).abs() < 1e-12);
+        assert_eq!((rect.stretch, wide.stretch), (1.0, 2.0));
+        for (i, z) in [ALT.0, 0.0, ALT.1].into_iter().enumerate() {
+            let point = (ROI.x as f64 + 37.0 * i as f64, ROI.y as f64 + 53.0, z);
+            let (pl, pr) = rectified(&rect.h_left, &rect.h_right, &l, &r, point);
+            let (sl, sr) = rectified(&wide.h_left, &wide.h_right, &l, &r, point);
+            assert!((sl.1 - pl.1).abs() < 1e-9 && (sr.1 - sl.1).abs() < 1e-8, "{name}: rows");
+            let (d, ds) = (pl.0 - pr.0, sl.0 - sr.0);
+            assert!((ds - 2.0 * d).abs() < 1e-8, "{name}: {ds} is not twice {d}");
+            assert!((lo as f64..=hi as f64).contains(&ds), "{name}: {ds} outside {lo}..{hi}");
+            assert!(sl.0 >= -1e-9 && sl.0 <= wide.size.0 as f64 - 1.0 + 1e-9, "{name}");
+        }
+    }
+}
+
+#[test]
 fn similarities_depend_on_f_only_up_to_sign() {
     let (_, l, r) = pairs()[3];
     let ground = matches_from_cameras(&l, &r, ROI, ALT).unwrap();

@@ -18,8 +18,9 @@ use crate::args::{
 #[derive(Args)]
 #[command(
     after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
-    altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W), \
-    triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
+    altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W; \
+    on very narrow baselines, under 0.4 px of disparity per metre of altitude, the classical \
+    matcher works on rows stretched 2x for half-pixel steps), triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
     --work (default OUTPUT_work/: L/, R/, homography/, rectify/, disparity/), in the layout \
     `seasonstereo eval` reads.\n\n\
     Example (DFC2019 Jacksonville, bundle-adjusted cameras, scored against the LiDAR truth):\n  \
@@ -90,8 +91,8 @@ pub struct ReconstructArgs {
     #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_CELLS)]
     fill_holes: usize,
     /// Median filter of the DSM over this odd window of cells, after the filling: removes the
-    /// roughness of single-pair matching on roofs and ground and keeps building edges (7 cells =
-    /// 3.5 m at 0.5 m); 0 or 1 disables it.
+    /// roughness of single-pair matching on roofs and ground and keeps building edges (15 cells
+    /// = 7.5 m at 0.5 m); 0 or 1 disables it.
     #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_MEDIAN_CELLS)]
     median_filter: usize,
     /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)

@@ -65,7 +65,7 @@ pub struct ReconstructManyArgs {
     #[arg(long, value_name = "CELLS", default_value_t = 40)]
     fill_holes: usize,
     /// Median filter of the fused DSM over this odd window of cells; 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = 7)]
+    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::FUSED_MEDIAN_CELLS)]
     median_filter: usize,
     /// Median filter of each pair's DSM before fusion (never fills a cell); 0 or 1 disables it.
     #[arg(long, value_name = "CELLS", default_value_t = 0)]

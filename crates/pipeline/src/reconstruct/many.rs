@@ -40,7 +40,7 @@ use super::select::{
 };
 use super::tile::TileStatus;
 use super::{footprint, reconstruct, score_against_truth, ReconstructOptions};
-use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS};
 use crate::eval::align::{align, AlignParams};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
@@ -122,7 +122,7 @@ impl ReconstructManyOptions {
             min_support: None,
             co_register: false,
             fill_holes: Some(DEFAULT_FILL_CELLS),
-            median_filter: Some(DEFAULT_MEDIAN_CELLS),
+            median_filter: Some(FUSED_MEDIAN_CELLS),
             pair_median_filter: None,
             truth: None,
             alt_range: None,

@@ -19,7 +19,7 @@ use raster::Image;
 
 use super::project::render_into_image;
 use crate::dsm::{
-    finish_dsm, read_camera, triangulate_files, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS,
+    finish_dsm, read_camera, triangulate_files, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS,
 };
 use crate::pairs::{PairFolder, RectifiedFiles, RectifyRecord};
 
@@ -333,7 +333,7 @@ pub fn image_heights(
     let filled = finish_dsm(
         measured.clone(),
         Some(DEFAULT_FILL_CELLS),
-        Some(DEFAULT_MEDIAN_CELLS),
+        Some(FUSED_MEDIAN_CELLS),
     )?;
     let ground = ground_level(&filled, RESOLUTION);
     let above = |dsm: &Image| {
