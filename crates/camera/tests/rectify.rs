@@ -219,11 +219,20 @@ fn a_stretched_rectification_multiplies_disparities_and_keeps_rows() {
             let point = (ROI.x as f64 + 37.0 * i as f64, ROI.y as f64 + 53.0, z);
             let (pl, pr) = rectified(&rect.h_left, &rect.h_right, &l, &r, point);
             let (sl, sr) = rectified(&wide.h_left, &wide.h_right, &l, &r, point);
-            assert!((sl.1 - pl.1).abs() < 1e-9 && (sr.1 - sl.1).abs() < 1e-8, "{name}: rows");
+            assert!(
+                (sl.1 - pl.1).abs() < 1e-9 && (sr.1 - sl.1).abs() < 1e-8,
+                "{name}: rows"
+            );
             let (d, ds) = (pl.0 - pr.0, sl.0 - sr.0);
             assert!((ds - 2.0 * d).abs() < 1e-8, "{name}: {ds} is not twice {d}");
-            assert!((lo as f64..=hi as f64).contains(&ds), "{name}: {ds} outside {lo}..{hi}");
-            assert!(sl.0 >= -1e-9 && sl.0 <= wide.size.0 as f64 - 1.0 + 1e-9, "{name}");
+            assert!(
+                (lo as f64..=hi as f64).contains(&ds),
+                "{name}: {ds} outside {lo}..{hi}"
+            );
+            assert!(
+                sl.0 >= -1e-9 && sl.0 <= wide.size.0 as f64 - 1.0 + 1e-9,
+                "{name}"
+            );
         }
     }
 }

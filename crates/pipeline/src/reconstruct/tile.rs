@@ -132,8 +132,9 @@ pub fn tile_rectification(scene: &Scene, tile: &Tile) -> Result<Rectification> {
         scene.alt_range,
     )
     .with_context(|| format!("rectifying tile {} ({:?})", tile.id, tile.extended))?;
-    let classical = matches!(scene.matcher, Matcher::Classical(_));
-    Ok(if classical && rect.pixels_per_metre < NARROW_PIXELS_PER_METRE {
+    let narrow = matches!(scene.matcher, Matcher::Classical(_))
+        && rect.pixels_per_metre < NARROW_PIXELS_PER_METRE;
+    Ok(if narrow {
         rect.stretched(NARROW_STRETCH)
     } else {
         rect
