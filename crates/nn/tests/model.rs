@@ -92,32 +92,15 @@ fn run(model: &Monster, fx: &Fixture, test_mode: bool) -> MonsterOutput {
     out
 }
 
-/// `compute_scale_shift` (sort, strict masks, a mildly ill-conditioned 2×2 solve in f32) amplifies
-/// the ~1e-5 px differences of its inputs end to end: measured 2.2e-4 relative on the scale and
-/// 2e-6 on the shift, i.e. ≤ 5e-5 px on the aligned mono disparity (the parts test, fed with the
-/// fixture's own inputs, gets 2.4e-6). Checked relatively (1e-3) and by its effect in pixels.
-fn check_scale_shift(got: &[(f32, f32)], want: &[f32], mono_max: f32) {
-    assert_eq!(got.len(), 1, "one sample");
-    let (s, t) = got[0];
-    let rs = (s - want[0]).abs() / want[0].abs();
-    let rt = (t - want[1]).abs() / want[1].abs();
-    let px = (s - want[0]).abs() * mono_max + (t - want[1]).abs();
-    println!(
-        "scale_shift ({s}, {t}) vs {want:?}: relative errors {rs:.2e}, {rt:.2e}; \
-         effect on the aligned mono disparity ≤ {px:.2e} px"
-    );
-    assert!(
-        rs <= 1e-3 && rt <= 1e-3 && px <= 1e-3,
-        "scale/shift {got:?} vs {want:?}"
-    );
-}
-
 /// max |depth_mono| of the fixture (bounds the mono disparity at 1/4 resolution).
 fn mono_max(fx: &Fixture) -> f32 {
-    fx.raw("output.depth_mono")
-        .1
-        .iter()
-        .fold(0.0f32, |m, v| m.max(v.abs()))
+    support::max_abs(&fx.raw("output.depth_mono").1)
+}
+
+/// The one sample's scale/shift against the fixture's.
+fn check_scale_shift(got: &[(f32, f32)], want: &[f32], mono_max: f32) {
+    assert_eq!(got.len(), 1, "one sample");
+    support::check_scale_shift(got[0], want, mono_max);
 }
 
 #[test]
