@@ -1,18 +1,9 @@
 //! The command line as a user drives it: real files in, real files out, clear errors.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
-fn seasonstereo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod support;
+use support::{seasonstereo, stderr};
 
 #[test]
 fn world_then_predict_in_every_output_format() {

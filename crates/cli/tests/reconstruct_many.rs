@@ -2,18 +2,9 @@
 //! fused; bad input refused before any work with the inputs untouched.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn seasonstereo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod support;
+use support::{seasonstereo, stderr};
 
 fn image(d: &Path, id: &str) -> String {
     d.join(format!("images/JAX_068_{id}_RGB.tif"))

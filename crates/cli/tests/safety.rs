@@ -8,20 +8,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn seasonstereo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn code(o: &Output) -> i32 {
-    o.status.code().expect("exited, not killed")
-}
+mod support;
+use support::{code, seasonstereo, stderr};
 
 /// A raw procedural pair: `(left, right, rpc_left, rpc_right)`.
 struct Scene {
