@@ -9,7 +9,9 @@
 # kernels at run time through NVRTC, which the runtime image provides); run it with `--gpus all`.
 ARG RUNTIME=debian:bookworm-slim
 
-FROM rust:1.85-bookworm AS build
+# The toolchain of the workspace's rust-version (burn 0.22 needs 1.95), on the runtime's Debian
+# release so that the binary finds the same glibc.
+FROM rust:1.95-bookworm AS build
 ARG FEATURES=""
 WORKDIR /src
 COPY . .
