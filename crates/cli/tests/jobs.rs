@@ -241,6 +241,8 @@ fn dataset_args(src: &Path, work: &Path, out: &Path) -> Vec<String> {
             "--teacher-name 'sgm x' --seed 3",
             "--sbatch-args",
             "-p debug --comment 'a b'",
+            "--stage-sbatch-args",
+            "teacher=--gres=gpu:1 --comment 'on a gpu'",
             "--wait",
         ]
         .map(String::from),
@@ -278,6 +280,18 @@ fn dataset_stages_chain_with_checks_and_a_failed_shard_is_resubmitted_alone() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("fix --curate-args"), "{}", text(&o));
     assert!(cluster.log().is_empty(), "{}", cluster.log());
+    // So does a stage that does not exist.
+    let mut bad = dataset_args(&src, &dir.path().join("w0"), &dir.path().join("s0"));
+    let at = bad.iter().position(|a| a.starts_with("teacher=")).unwrap();
+    bad[at] = "teachr=--gres=gpu:1".into();
+    let o = run_strings(&cluster, &bad);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("no stage teachr (the stages: teacher,"),
+        "{}",
+        text(&o)
+    );
+    assert!(cluster.log().is_empty(), "{}", cluster.log());
 
     // The whole chain: 5 arrays of 2 tasks, a check after each, the finalize.
     let (work, out) = (dir.path().join("my work"), dir.path().join("my set"));
@@ -294,6 +308,17 @@ fn dataset_stages_chain_with_checks_and_a_failed_shard_is_resubmitted_alone() {
         assert!(log.contains(&after), "{next}: {log}");
     }
     assert!(log.contains("[-p] [debug] [--comment] [a b]"), "{log}");
+    // The teacher's array alone gets its own options, after the chain's.
+    let gpu: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("[--gres=gpu:1]"))
+        .collect();
+    assert_eq!(gpu.len(), 1, "{log}");
+    assert!(gpu[0].contains("[--job-name=ss-teacher]"), "{log}");
+    assert!(
+        gpu[0].contains("[a b] [--gres=gpu:1] [--comment] [on a gpu]"),
+        "{log}"
+    );
     assert!(!log.lines().any(|l| l.starts_with("task ")), "{log}");
     assert!(
         !log.lines()

@@ -67,6 +67,11 @@ pub struct SlurmDatasetArgs {
     /// memory, GPUs), e.g. "-p long --cpus-per-task=8 --mem=32G"; after ours, so they win.
     #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
     sbatch_args: Option<String>,
+    /// sbatch options of one stage's tasks only, STAGE=ARGS (teacher, curate, synthesize,
+    /// masks, build, finalize), after --sbatch-args so they win; repeat for several stages,
+    /// e.g. --stage-sbatch-args "teacher=--gres=gpu:1 -p gpu".
+    #[arg(long, value_name = "STAGE=ARGS", allow_hyphen_values = true)]
+    stage_sbatch_args: Vec<String>,
     /// Block until the finalize pass ends; exit 0 when it succeeded, else 2 naming the failed
     /// shards.
     #[arg(long)]
@@ -133,21 +138,46 @@ fn stage_lines(a: &SlurmDatasetArgs) -> Result<Vec<StageLine>> {
             None => w.to_string(),
         },
     };
+    let stage_sbatch = stage_sbatch_args(&a.stage_sbatch_args)?;
     let mut lines = Vec::new();
     for (name, flag, template) in STAGES {
         let mut args: Vec<String> = template.split_whitespace().map(word).collect();
         args.extend(extra(flag, extra_text(a, flag))?);
         args.extend(global_flags());
         check_line(name, flag, &args)?;
-        let sharded = name != "finalize";
-        let name = name.into();
+        let sbatch_args = stage_sbatch
+            .iter()
+            .filter(|(stage, _)| stage == name)
+            .flat_map(|(_, words)| words.iter().cloned())
+            .collect();
         lines.push(StageLine {
-            name,
+            name: name.into(),
             args,
-            sharded,
+            sharded: name != "finalize",
+            sbatch_args,
         });
     }
     Ok(lines)
+}
+
+/// `--stage-sbatch-args STAGE=ARGS` as (stage, words), each stage one of the chain's.
+fn stage_sbatch_args(given: &[String]) -> Result<Vec<(String, Vec<String>)>> {
+    given
+        .iter()
+        .map(|g| {
+            let (stage, text) = g.split_once('=').with_context(|| {
+                format!("--stage-sbatch-args {g}: give STAGE=ARGS, e.g. \"teacher=--gres=gpu:1\"")
+            })?;
+            if !STAGES.iter().any(|(name, _, _)| *name == stage) {
+                let names: Vec<&str> = STAGES.iter().map(|s| s.0).collect();
+                bail!(
+                    "--stage-sbatch-args {g}: no stage {stage} (the stages: {})",
+                    names.join(", ")
+                );
+            }
+            Ok((stage.to_string(), split(text)?))
+        })
+        .collect()
 }
 
 /// The user's text of a stage's `--<stage>-args`.

@@ -23,6 +23,9 @@ pub struct StageLine {
     pub args: Vec<String>,
     /// Run as an array of `--shard I/N` tasks; else one task without `--shard`.
     pub sharded: bool,
+    /// sbatch options of this stage's tasks only, after the chain's (they win): a GPU for the
+    /// teacher, more memory for synthesize.
+    pub sbatch_args: Vec<String>,
 }
 
 /// A chain to submit.
@@ -139,12 +142,13 @@ fn write_stage(
             &body,
         )?;
     }
-    let options = |name: &str, pattern: &str, ours: &[&str]| {
+    let options = |name: &str, pattern: &str, ours: &[&str], stage: &[String]| {
         let log = dir.join("logs").join(format!("{name}-{pattern}.log"));
         let mut v = vec![format!("--job-name=ss-{name}")];
         v.extend(ours.iter().map(|o| o.to_string()));
         v.push(format!("--output={}", log.display()));
         v.extend(req.sbatch_args.iter().cloned());
+        v.extend(stage.iter().cloned());
         v
     };
     let pattern = if line.sharded { "%A_%a" } else { "%j" };
@@ -155,8 +159,8 @@ fn write_stage(
         sharded: line.sharded,
         script,
         check,
-        sbatch: options(&line.name, pattern, &[]),
-        check_sbatch: options(&check_name, "%j", &["--cpus-per-task=1", "--mem=256M"]),
+        sbatch: options(&line.name, pattern, &[], &line.sbatch_args),
+        check_sbatch: options(&check_name, "%j", &["--cpus-per-task=1", "--mem=256M"], &[]),
     })
 }
 
