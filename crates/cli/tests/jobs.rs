@@ -50,7 +50,10 @@ impl Cluster {
         std::fs::create_dir_all(&bin).unwrap();
         std::fs::write(bin.join("sbatch"), SBATCH).unwrap();
         std::fs::write(bin.join("sinfo"), "#!/bin/sh\necho 2\n").unwrap();
-        for tool in ["sbatch", "sinfo"] {
+        // The jobs still queued: those listed in `<log>.queue` (the fake runs every job at once).
+        let squeue = "#!/bin/sh\ncat \"$FAKE_SLURM_LOG.queue\" 2>/dev/null; exit 0\n";
+        std::fs::write(bin.join("squeue"), squeue).unwrap();
+        for tool in ["sbatch", "sinfo", "squeue"] {
             let p = bin.join(tool);
             let mut perm = std::fs::metadata(&p).unwrap().permissions();
             std::os::unix::fs::PermissionsExt::set_mode(&mut perm, 0o755);
@@ -74,6 +77,17 @@ impl Cluster {
 
     fn log(&self) -> String {
         std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Makes `squeue` list these job ids as still queued or running (none: an empty queue).
+    fn queue(&self, ids: &[&str]) {
+        let mut path = self.log.clone().into_os_string();
+        path.push(".queue");
+        std::fs::write(
+            path,
+            ids.iter().map(|i| format!("{i}\n")).collect::<String>(),
+        )
+        .unwrap();
     }
 }
 
@@ -206,14 +220,27 @@ fn a_submission_gives_the_local_dsm_and_failed_tiles_are_named_and_resubmitted()
     );
 
     std::fs::write(&left, good).unwrap();
+    // While the tile array is still queued, resubmitting would run its tiles twice: refused.
+    cluster.queue(&["1", "2", "3", "4"]);
     let before = cluster.log().len();
-    let o = cluster.run(&[
+    let resubmit = [
         "jobs",
         "resubmit",
         "--work",
         work.to_str().unwrap(),
         "--wait",
-    ]);
+    ];
+    let o = cluster.run(&resubmit);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("job(s) 3, 4 of this work folder are still queued"),
+        "{}",
+        text(&o)
+    );
+    assert!(text(&o).contains("scancel 3 4"), "{}", text(&o));
+    assert_eq!(cluster.log().len(), before, "nothing submitted");
+    cluster.queue(&[]);
+    let o = cluster.run(&resubmit);
     assert!(o.status.success(), "{}\n{}", text(&o), cluster.log());
     let resubmitted = cluster.log()[before..].to_string();
     assert!(resubmitted.contains("[--array=4,5,7,8]"), "{resubmitted}");

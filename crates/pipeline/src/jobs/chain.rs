@@ -82,6 +82,13 @@ pub fn resubmit_chain(work: &Path, wait: bool) -> Result<ChainSubmitted> {
         );
     };
     let tasks = s.stages[from].shards.tasks_to_rerun();
+    let ids = s
+        .record
+        .submissions
+        .iter()
+        .flatten()
+        .map(|(_, id)| id.as_str());
+    super::sbatch::refuse_while_queued(ids)?;
     submit(work, s.record, from, tasks, wait)
 }
 

@@ -1,4 +1,5 @@
-//! Running `sbatch`: a job id back, and with `--wait` the job's exit code.
+//! Running `sbatch`: a job id back, and with `--wait` the job's exit code; and asking `squeue`
+//! which of a work folder's jobs Slurm still holds, before any of their work is sent again.
 
 use std::process::Command;
 
@@ -28,4 +29,39 @@ pub fn sbatch(args: &[String], wait: bool) -> Result<(String, Option<i32>)> {
             String::from_utf8_lossy(&out.stderr).trim()
         ),
     }
+}
+
+/// Refuses to resubmit while any of `ids` (a work folder's submitted jobs) is still queued or
+/// running for this user: its tasks have no exit marker yet, and sending them again would run
+/// them twice, racing on the same outputs.
+pub fn refuse_while_queued<'a>(ids: impl IntoIterator<Item = &'a str>) -> Result<()> {
+    let ours: Vec<&str> = ids.into_iter().collect();
+    // %F: the array's job id for an array task, the job id otherwise.
+    let out = Command::new("squeue")
+        .args(["--noheader", "--me", "--format=%F"])
+        .output()
+        .context("running squeue (is this a Slurm login node, with squeue on PATH?)")?;
+    if !out.status.success() {
+        bail!(
+            "squeue --me failed: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    let queued = String::from_utf8_lossy(&out.stdout);
+    let mut active: Vec<&str> = ours
+        .into_iter()
+        .filter(|id| queued.lines().any(|l| l.trim() == *id))
+        .collect();
+    active.sort_unstable();
+    active.dedup();
+    if !active.is_empty() {
+        bail!(
+            "job(s) {} of this work folder are still queued or running (squeue): wait for \
+             them to end (jobs status shows their tasks), or cancel them (scancel {}), then \
+             resubmit",
+            active.join(", "),
+            active.join(" ")
+        );
+    }
+    Ok(())
 }

@@ -92,6 +92,8 @@ pub fn resubmit(work: &Path, wait: bool) -> Result<Submitted> {
             s.record.merge_script.display()
         );
     }
+    let ids = s.record.submissions.iter();
+    super::sbatch::refuse_while_queued(ids.flat_map(|(t, m)| [t.as_str(), m.as_str()]))?;
     submit(work, s.record, &tasks, wait)
 }
 
