@@ -8,10 +8,11 @@ use std::ops::Range;
 use std::path::Path;
 
 use anyhow::Result;
-use camera::{dsm_writer, DsmGrid, Gridding};
+use camera::{dsm_writer, DsmGrid, GridWindow, Gridding};
 use raster::formats::cog::COG_TILE;
 use raster::formats::CogWriter;
 use raster::Image;
+use rayon::prelude::*;
 
 use super::folder::TileFolder;
 use super::mosaic::Mosaic;
@@ -50,8 +51,8 @@ impl Finishing {
 }
 
 /// Peak bytes per cell of a block and its halo while it is finished: the mosaic (height +
-/// count), the measured, filled and filtered copies, the sidecar, and a tile's cells being read
-/// (height + count as float32).
+/// count), the measured, filled and filtered copies, the sidecar, and the tiles' cells read for
+/// it (height + count as float32).
 const BLOCK_BYTES_PER_CELL: u64 = 34;
 
 /// Memory the assembly of the DSM needs, bytes: one block of `block_rows` rows with its halo
@@ -110,11 +111,13 @@ pub fn merge_tiles(
         let window =
             block.start.saturating_sub(halo)..block.end.saturating_add(halo).min(grid.height);
         let mut mosaic = Mosaic::new(grid, window.clone(), finishing.gridding);
-        for record in &parts {
-            let cells = record.cells.expect("a finished tile's cells");
-            if let Some(part) = folder.cells(record, cells, window.clone())? {
-                mosaic.add(&part);
-            }
+        // Read in parallel, merged in the records' order (ties go to the first tile).
+        let cells: Vec<Option<GridWindow>> = parts
+            .par_iter()
+            .map(|r| folder.cells(r, r.cells.expect("a finished tile's cells"), window.clone()))
+            .collect::<Result<_>>()?;
+        for part in cells.iter().flatten() {
+            mosaic.add(part);
         }
         let measured = mosaic.into_image();
         let finished = finish_dsm(
