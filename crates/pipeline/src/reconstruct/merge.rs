@@ -21,7 +21,8 @@ use super::{gib, ReconstructOptions};
 use crate::dsm::{filled_mask, filled_path, finish_dsm, DsmSummary};
 
 /// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
-/// block as it comes), about 150 MiB for a 16,384-cell-wide grid with the default filling.
+/// block as it comes); with its halo, about 180 MiB for a 16,384-cell-wide grid with the default
+/// filling.
 pub const MERGE_BLOCK_ROWS: usize = COG_TILE;
 
 /// How the merged cells become the DSM (the options' gridding, hole filling and median filter).
@@ -86,6 +87,9 @@ pub fn check_merge_memory(grid: &DsmGrid, merge_memory: u64, max_memory: u64) ->
     Ok(())
 }
 
+/// A tile's cells on the grid: column, row, width, height.
+type Cells = (usize, usize, usize, usize);
+
 /// Merges the finished tiles' cells into the DSM at `output` (and its filled-cell sidecar),
 /// `block_rows` rows at a time, finishing it on the way (holes, median filter).
 pub fn merge_tiles(
@@ -96,11 +100,14 @@ pub fn merge_tiles(
     output: &Path,
     block_rows: usize,
 ) -> Result<DsmSummary> {
-    let parts: Vec<&TileRecord> = records
+    let parts: Vec<(&TileRecord, Cells)> = records
         .iter()
-        .filter(|r| r.status == TileStatus::Done && r.cells.is_some())
+        .filter_map(|r| match (r.status, r.cells) {
+            (TileStatus::Done, Some(cells)) => Some((r, cells)),
+            _ => None,
+        })
         .collect();
-    let points = parts.iter().map(|r| r.points).sum();
+    let points = parts.iter().map(|(r, _)| r.points).sum();
     let sidecar = filled_path(output);
     let mut dsm_out = Output::create(output, grid)?;
     let mut filled_out = Output::create(&sidecar, grid)?;
@@ -114,7 +121,8 @@ pub fn merge_tiles(
         // Read in parallel, merged in the records' order (ties go to the first tile).
         let cells: Vec<Option<GridWindow>> = parts
             .par_iter()
-            .map(|r| folder.cells(r, r.cells.expect("a finished tile's cells"), window.clone()))
+            .filter(|(_, (_, row, _, height))| *row < window.end && row + height > window.start)
+            .map(|(r, cells)| folder.cells(r, *cells, window.clone()))
             .collect::<Result<_>>()?;
         for part in cells.iter().flatten() {
             mosaic.add(part);
