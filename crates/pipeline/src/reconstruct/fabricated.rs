@@ -62,7 +62,7 @@ pub fn fabricate_tiles(
             if let Some(done) = folder.record(&t) {
                 return Ok(done);
             }
-            let mut record = record(&t);
+            let mut record = TileRecord::new(&t, 0);
             if index == failed {
                 record.status = TileStatus::Failed;
                 record.error = Some("fabricated failure".into());
@@ -77,22 +77,6 @@ pub fn fabricate_tiles(
         })
         .collect::<Result<Vec<_>>>()?;
     Ok(Fabricated { grid, records })
-}
-
-fn record(tile: &Tile) -> TileRecord {
-    TileRecord {
-        tile: tile.clone(),
-        status: TileStatus::Done,
-        error: None,
-        seconds: 0.0,
-        disparity_range: None,
-        rectified_size: None,
-        matched: None,
-        vertical_parallax: None,
-        points: 0,
-        memory_bytes: 0,
-        cells: None,
-    }
 }
 
 /// The cells of tile `index` over `window`: the scene's height plus a small offset of its own,
