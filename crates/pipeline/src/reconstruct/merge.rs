@@ -294,8 +294,8 @@ mod tests {
     fn the_halo_is_the_filling_and_median_reach_and_a_huge_grid_fits_in_little_memory() {
         let default = Finishing {
             gridding: Gridding::Median,
-            fill_holes: Some(DEFAULT_FILL_CELLS),
-            median_filter: Some(DEFAULT_MEDIAN_CELLS),
+            fill_holes: Some(40),
+            median_filter: Some(7),
         };
         assert_eq!(default.halo(), 43);
         let none = Finishing {
