@@ -486,11 +486,26 @@ pub fn write_dsm(path: impl AsRef<Path>, image: &Image, grid: &DsmGrid) -> Resul
             grid.height
         )));
     }
-    let meta = GeoTiffMeta {
+    raster::formats::write_cog(path, image, &dsm_meta(grid))?;
+    Ok(())
+}
+
+/// A writer of a DSM on `grid` given by blocks of rows, top to bottom: the file [`write_dsm`]
+/// writes, without holding the whole DSM (call `finish` after the last row).
+pub fn dsm_writer(path: impl AsRef<Path>, grid: &DsmGrid) -> Result<raster::formats::CogWriter> {
+    let size = (grid.width, grid.height, 1);
+    Ok(raster::formats::CogWriter::new(
+        path,
+        size,
+        &dsm_meta(grid),
+    )?)
+}
+
+/// The tags of a DSM on `grid`: its georeference and NaN as nodata.
+fn dsm_meta(grid: &DsmGrid) -> GeoTiffMeta {
+    GeoTiffMeta {
         georef: Some(grid.georeference()),
         nodata: Some(f64::NAN),
         rpc: None,
-    };
-    raster::formats::write_cog(path, image, &meta)?;
-    Ok(())
+    }
 }

@@ -14,8 +14,8 @@ pub mod triangulate;
 pub mod utm;
 
 pub use dsm::{
-    fill_holes, median_filter, rasterize, rasterize_max, rasterize_window, read_dsm, write_dsm,
-    DsmGrid, DsmRaster, GridWindow, Gridding,
+    dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window, read_dsm,
+    write_dsm, DsmGrid, DsmRaster, GridWindow, Gridding,
 };
 pub use error::CameraError;
 pub use rpc::RpcModel;

@@ -1,6 +1,8 @@
 //! `seasonstereo bench`: how fast the networks run here, with random weights: one warm-up run,
-//! then N timed runs; the median and the minimum, and the process's peak RSS.
+//! then N timed runs; the median and the minimum, and the process's peak RSS. `bench merge`
+//! times the assembly of a DSM instead ([`crate::bench_merge`]).
 
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
@@ -20,13 +22,17 @@ pub enum BenchWorkload {
     /// One training step of MonSter++ with the SeasonStereo loss and AdamW (default tiny,
     /// 64×128, batch 1, 7 iterations).
     TrainStep,
+    /// The assembly of a whole-scene DSM from fabricated finished tiles (no stereo, no network):
+    /// one run, its time and peak RSS.
+    Merge,
 }
 
 #[derive(Args)]
 #[command(
     after_help = "Examples:\n  seasonstereo bench monsterpp --config vits --height 256 \
     --width 512 --iters 12 --max-disp 192 --runs 3 --json\n  seasonstereo bench segformer \
-    --height 1000\n  seasonstereo bench train-step --config vits --height 128 --width 128\n\n\
+    --height 1000\n  seasonstereo bench train-step --config vits --height 128 --width 128\n  \
+    seasonstereo bench merge --cells 16384 --work merge16k\n\n\
     Weights are random: the time of a pass does not depend on them. Compare with the PyTorch \
     reference the same way (BENCHMARKS.md)."
 )]
@@ -63,11 +69,24 @@ pub struct BenchArgs {
     /// upsampling, REMP; the groups of `scripts/peers/monsterpp_torch.py --profile`).
     #[arg(long)]
     profile: bool,
+    /// merge: cells on each side of the fabricated square grid.
+    #[arg(long, default_value_t = 16384)]
+    cells: usize,
+    /// merge: rows of the DSM finished at once (default 256; the grid's side merges it whole).
+    #[arg(long)]
+    block_rows: Option<usize>,
+    /// merge: the fabricated work folder, made once and reused (default: in the temporary
+    /// folder).
+    #[arg(long)]
+    work: Option<PathBuf>,
     #[command(flatten)]
     device: DeviceArg,
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
+    if let BenchWorkload::Merge = a.workload {
+        return crate::bench_merge::run(a.cells, a.block_rows, a.work, a.json);
+    }
     if a.runs == 0 {
         anyhow::bail!("--runs must be at least 1");
     }
@@ -114,6 +133,7 @@ impl BenchShape {
             BenchWorkload::Segformer => ("mit-b2", 1000, 1000, 0, 1),
             BenchWorkload::Dinov3 => ("vits16", 224, 224, 0, 2),
             BenchWorkload::TrainStep => ("tiny", 64, 128, 7, 1),
+            BenchWorkload::Merge => ("", 0, 0, 0, 1),
         };
         let height = a.height.unwrap_or(h);
         // The square networks take --height alone as their side.
@@ -138,6 +158,7 @@ impl BenchShape {
                 train::bench::step_config(p, h, w, self.batch, self.iters, a.max_disp)
                     .and_then(|c| train::bench::train_step(&c, device))
             }
+            BenchWorkload::Merge => unreachable!("bench merge runs before the networks' shapes"),
         }
         .map_err(|e| anyhow!("{e}"))
     }

@@ -11,6 +11,7 @@ mod allocator;
 mod args;
 mod bars;
 mod bench;
+mod bench_merge;
 mod curate;
 mod dataset;
 mod demo;

@@ -2,7 +2,8 @@
 //! is cut into tiles with overlap collars ([`plan`]); each tile is rectified on its own from the
 //! RPCs, matched over the disparity range its cameras and the scene's altitudes imply,
 //! triangulated and gridded ([`tile`]); the tiles' cells are merged into one DSM on a common UTM
-//! grid ([`mosaic`]), hole-filled, filtered and written as a Cloud-Optimized GeoTIFF.
+//! grid ([`mosaic`]), hole-filled, filtered and written as a Cloud-Optimized GeoTIFF, a block of
+//! rows at a time ([`merge`]).
 //!
 //! Memory stays bounded: the raw images are read by windows ([`raw`]), each tile's peak memory
 //! is estimated before it runs, and only as many tiles run at once as fit in the budget.
@@ -14,9 +15,11 @@
 //! Many acquisitions of one area become one DSM in [`many`]: the pairs chosen by [`select`] run
 //! through [`reconstruct`] on one grid and [`fuse`] merges their measured cells.
 
+pub mod fabricated;
 pub mod folder;
 pub mod fuse;
 pub mod many;
+pub mod merge;
 pub mod mosaic;
 pub mod options;
 pub mod plan;
@@ -31,18 +34,18 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use camera::rectify::{Rectification, Roi};
-use camera::{write_dsm, DsmGrid, RpcModel, UtmZone};
+use camera::{DsmGrid, RpcModel, UtmZone};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::dsm::{finish_dsm, DsmSummary, GridChoice};
+use crate::dsm::{DsmSummary, GridChoice};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
 use crate::progress::Progress;
 use crate::rectify::{altitude_range, camera_of, file_stem};
 use crate::stage::write_json;
 use folder::TileFolder;
-use mosaic::Mosaic;
+use merge::{check_merge_memory, merge_tiles, Finishing, MERGE_BLOCK_ROWS};
 use plan::{plan_tiles, Tile};
 use raw::RawImage;
 use tile::{run_tile, tile_memory, tile_rectification, Scene, TileRecord, TileStatus};
@@ -65,8 +68,8 @@ pub struct ReconstructSummary {
     /// Tiles run at once, and the largest tile's estimated memory, bytes.
     pub in_flight: usize,
     pub tile_memory: u64,
-    /// Memory the assembly of the DSM needs, bytes: it holds the whole grid (merge, hole
-    /// filling, median filter), outside the tiles' budget.
+    /// Memory the assembly of the DSM needs, bytes: it holds a block of rows of the grid and its
+    /// halo at a time ([`merge::merge_memory`]), outside the tiles' budget.
     pub merge_memory: u64,
     /// The DSM, once every tile has a record.
     pub dsm: Option<DsmSummary>,
@@ -234,7 +237,8 @@ fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, ScenePlan)> {
     let stem = format!("{}-{}", file_stem(&opts.left)?, file_stem(&opts.right)?);
     let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
     let grid = scene_grid(&opts.grid, &pair.rpc_left, roi, pair.alt_range)?;
-    let merge_memory = merge_memory(&grid, opts.max_memory)?;
+    let merge_memory = merge::merge_memory(&grid, &Finishing::of(opts), MERGE_BLOCK_ROWS);
+    check_merge_memory(&grid, merge_memory, opts.max_memory)?;
     let plan = ScenePlan {
         work,
         stem,
@@ -324,7 +328,14 @@ pub fn reconstruct(
         sanity::check_complete(&summary.records, &work)?;
     }
     let t = Instant::now();
-    summary.dsm = Some(merge_tiles(opts, &grid, &folder, &summary.records)?);
+    summary.dsm = Some(merge_tiles(
+        &Finishing::of(opts),
+        &grid,
+        &folder,
+        &summary.records,
+        &opts.output,
+        MERGE_BLOCK_ROWS,
+    )?);
     summary.seconds.push(("merge", t.elapsed().as_secs_f64()));
     if let Some(truth) = &opts.truth {
         summary.scores = Some(score_against_truth(&opts.output, truth, &grid)?);
@@ -457,23 +468,6 @@ fn scene_settings(
     }
 }
 
-/// Memory the assembly needs, checked against the budget before any tile runs: the tiles stay
-/// inside the budget by construction, but the assembly holds the whole grid.
-fn merge_memory(grid: &DsmGrid, max_memory: u64) -> Result<u64> {
-    let merge_memory = (grid.width * grid.height) as u64 * MERGE_BYTES_PER_CELL;
-    if merge_memory > max_memory {
-        bail!(
-            "assembling the {}x{}-cell DSM needs about {:.2} GiB, more than --max-memory {:.2} \
-             GiB: use a coarser --resolution, a smaller --roi, or raise --max-memory",
-            grid.width,
-            grid.height,
-            gib(merge_memory),
-            gib(max_memory)
-        );
-    }
-    Ok(merge_memory)
-}
-
 /// Held by the process besides the tiles (images' headers, records, thread stacks), bytes.
 pub(crate) const PROCESS_BYTES: u64 = 256 << 20;
 
@@ -603,57 +597,12 @@ fn tiles_at_once(matcher: &Matcher, max_memory: u64, largest: u64, todo: usize) 
     }
 }
 
-/// Merges the finished tiles' cells into the DSM, finishes it (holes, median filter) and writes
-/// it.
-fn merge_tiles(
-    opts: &ReconstructOptions,
-    grid: &DsmGrid,
-    folder: &TileFolder,
-    records: &[TileRecord],
-) -> Result<DsmSummary> {
-    let mut mosaic = Mosaic::new(grid, opts.gridding);
-    let mut points = 0;
-    for r in records {
-        if let (TileStatus::Done, Some(cells)) = (r.status, r.cells) {
-            mosaic.add(&folder.cells(r, cells)?);
-            points += r.points;
-        }
-    }
-    let dsm = mosaic.into_image(grid);
-    let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
-    let measured = dsm.clone();
-    let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
-    let filled = crate::dsm::filled_mask(&measured, &dsm)?;
-    drop(measured);
-    let sidecar = crate::dsm::filled_path(&opts.output);
-    for (path, image) in [(&opts.output, &dsm), (&sidecar, &filled)] {
-        write_dsm(path, image, grid).map_err(|e| crate::outputs::Incomplete::Nothing {
-            message: format!(
-                "writing {} failed: {e}; the tiles stay in the work folder: free space or fix \
-                 the folder and rerun the same command",
-                path.display()
-            ),
-        })?;
-    }
-    Ok(DsmSummary {
-        points,
-        measured_cells,
-        filled_cells: dsm.data().iter().filter(|v| v.is_finite()).count(),
-        grid: grid.clone(),
-        comparison: None,
-    })
-}
-
 /// The benchmark's scores of the written DSM against a ground-truth DSM on its grid.
 pub(crate) fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmScores> {
     let zone = UtmZone::from_epsg(grid.epsg)?;
     let truth = crate::score::read_truth(truth, zone)?;
     crate::score::score_dsm_file(dsm, &truth)
 }
-
-/// Peak bytes per DSM cell while assembling: the mosaic (height + count), the measured, filled and
-/// filtered copies and the filled-cell sidecar.
-const MERGE_BYTES_PER_CELL: u64 = 26;
 
 pub(crate) fn gib(bytes: u64) -> f64 {
     bytes as f64 / (1u64 << 30) as f64

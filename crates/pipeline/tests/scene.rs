@@ -225,6 +225,59 @@ fn a_broken_image_fails_its_tiles_only_and_a_tight_budget_names_the_fix() {
     );
 }
 
+/// A grid 16 times finer than the truth's (5120 × 5120 cells): assembled whole it would need
+/// about 26 bytes a cell, more than a 512 MiB budget; a block of rows at a time it fits, and the
+/// DSM is written. A budget under even one block's needs is refused with the fix.
+#[test]
+fn a_grid_too_large_to_assemble_whole_merges_in_blocks_within_the_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = raw_world(dir.path());
+    let truth = read_dsm(root.join("truth/W11_DSM.tif"), None).unwrap().grid;
+    let fine = |out: &str, max_memory: u64| ReconstructOptions {
+        truth: None,
+        grid: GridChoice::Resolution {
+            resolution: truth.resolution / 16.0,
+            bounds: Some([
+                truth.x0,
+                truth.y0 - truth.height as f64 * truth.resolution,
+                truth.x0 + truth.width as f64 * truth.resolution,
+                truth.y0,
+            ]),
+            epsg: Some(truth.epsg),
+        },
+        max_memory,
+        ..options(&root, &dir.path().join(out), 160)
+    };
+    let budget = 512u64 << 20;
+    let s = reconstruct(&fine("fine.tif", budget), &Silent).unwrap();
+    let dsm = s.dsm.unwrap();
+    let cells = (dsm.grid.width * dsm.grid.height) as u64;
+    assert_eq!(
+        (dsm.grid.width, dsm.grid.height),
+        (16 * truth.width, 16 * truth.height)
+    );
+    assert!(cells * 26 > budget, "the whole grid would not fit");
+    assert!(s.merge_memory < budget / 4, "{} bytes", s.merge_memory);
+    assert!(dsm.measured_cells > 10_000, "{}", dsm.measured_cells);
+    let written = read_dsm(dir.path().join("fine.tif"), None).unwrap().image;
+    let finite = written.data().iter().filter(|v| v.is_finite()).count();
+    assert_eq!(finite, dsm.filled_cells);
+
+    let msg = format!(
+        "{:#}",
+        reconstruct(&fine("tiny.tif", 40 << 20), &Silent).unwrap_err()
+    );
+    let size = format!(
+        "assembling the {0}x{1}-cell DSM",
+        16 * truth.width,
+        16 * truth.height
+    );
+    assert!(
+        msg.contains(&size) && msg.contains("raise --max-memory"),
+        "{msg}"
+    );
+}
+
 /// With weights, every tile is matched by MonSter++ (the tiny parity fixture: the geometry runs,
 /// the accuracy of random-ish weights is not the point), its strips planned inside the budget.
 #[cfg(feature = "network")]

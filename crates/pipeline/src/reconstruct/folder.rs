@@ -2,6 +2,7 @@
 //! (the cells). They make a run resumable and shardable: any process can tell which tiles are
 //! finished from the folder alone.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
@@ -52,13 +53,14 @@ impl TileFolder {
         write_json(&self.record_path(tile), &serde_json::to_value(record)?)
     }
 
-    /// The cells a finished tile saved.
+    /// The cells a finished tile saved on the grid's rows `rows` (`None` if it has none there).
     pub fn cells(
         &self,
         record: &TileRecord,
         cells: (usize, usize, usize, usize),
-    ) -> Result<GridWindow> {
-        read_part(&self.part_path(&record.tile), cells)
+        rows: Range<usize>,
+    ) -> Result<Option<GridWindow>> {
+        read_part(&self.part_path(&record.tile), cells, rows)
     }
 
     /// The records of the plan's tiles, in plan order, and the ids of the tiles without one.

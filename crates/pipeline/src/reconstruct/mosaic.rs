@@ -1,44 +1,51 @@
 //! Assembling the tiles' cells into one DSM grid. Neighbouring tiles can both put points in the
 //! cells along their shared edge; the merge keeps the highest of them for the benchmark's `max`
 //! gridding (exactly what one untiled pass gives) and, for the median gridding, the value of the
-//! tile that saw the cell with more points.
+//! tile that saw the cell with more points. A mosaic can hold a band of rows of the grid only,
+//! so that a DSM larger than memory is assembled a block at a time.
 
+use std::ops::Range;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use camera::{DsmGrid, GridWindow, Gridding};
-use raster::formats::{read_tiff, write_geotiff, GeoTiffMeta};
+use raster::formats::{write_geotiff, GeoTiffMeta, TiffReader};
 use raster::Image;
 
-/// The scene's DSM under construction.
+/// The scene's DSM under construction, on the grid's rows `rows`.
 pub struct Mosaic {
     width: usize,
+    rows: Range<usize>,
     heights: Vec<f32>,
     counts: Vec<u16>,
     gridding: Gridding,
 }
 
 impl Mosaic {
-    pub fn new(grid: &DsmGrid, gridding: Gridding) -> Self {
-        let n = grid.width * grid.height;
+    /// An empty mosaic of the rows `rows` of `grid`.
+    pub fn new(grid: &DsmGrid, rows: Range<usize>, gridding: Gridding) -> Self {
+        let n = grid.width * rows.len();
         Mosaic {
             width: grid.width,
+            rows,
             heights: vec![f32::NAN; n],
             counts: vec![0; n],
             gridding,
         }
     }
 
-    /// Merges one tile's cells.
+    /// Merges one tile's cells (those on the mosaic's rows).
     pub fn add(&mut self, part: &GridWindow) {
-        for r in 0..part.height {
+        let first = self.rows.start.saturating_sub(part.row);
+        let last = self.rows.end.saturating_sub(part.row).min(part.height);
+        for r in first..last {
             for c in 0..part.width {
                 let k = r * part.width + c;
                 let (v, n) = (part.heights[k], part.counts[k]);
                 if v.is_nan() {
                     continue;
                 }
-                let i = (part.row + r) * self.width + part.col + c;
+                let i = (part.row + r - self.rows.start) * self.width + part.col + c;
                 let (h, m) = (&mut self.heights[i], &mut self.counts[i]);
                 let take = match self.gridding {
                     Gridding::Max => h.is_nan() || v > *h,
@@ -55,9 +62,9 @@ impl Mosaic {
         }
     }
 
-    /// The gridded DSM.
-    pub fn into_image(self, grid: &DsmGrid) -> Image {
-        Image::new(grid.width, grid.height, 1, self.heights).expect("one value per cell")
+    /// The gridded DSM of the mosaic's rows.
+    pub fn into_image(self) -> Image {
+        Image::new(self.width, self.rows.len(), 1, self.heights).expect("one value per cell")
     }
 }
 
@@ -74,31 +81,42 @@ pub fn write_part(path: &Path, part: &GridWindow) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
-/// Reads back the cells [`write_part`] wrote for the window `(col, row, width, height)`.
-pub fn read_part(path: &Path, cells: (usize, usize, usize, usize)) -> Result<GridWindow> {
-    let image = read_tiff(path)
-        .with_context(|| format!("reading the tile cells {}", path.display()))?
-        .image;
+/// Reads back the cells [`write_part`] wrote for the window `(col, row, width, height)`: those
+/// on the grid's rows `rows` only (the file's strips elsewhere are not decoded), `None` when the
+/// window has none there.
+pub fn read_part(
+    path: &Path,
+    cells: (usize, usize, usize, usize),
+    rows: Range<usize>,
+) -> Result<Option<GridWindow>> {
+    let context = || format!("reading the tile cells {}", path.display());
+    let mut reader = TiffReader::open(path).with_context(context)?;
     let (col, row, width, height) = cells;
-    if image.size() != (width, height) || image.channels() != 2 {
+    if reader.size() != (width, height) || reader.bands() != 2 {
+        let (w, h) = reader.size();
         bail!(
-            "{}: expected {width}x{height} cells with 2 bands, found {}x{}x{}; delete the tile's \
-             record to recompute it",
+            "{}: expected {width}x{height} cells with 2 bands, found {w}x{h}x{}; delete the \
+             tile's record to recompute it",
             path.display(),
-            image.width(),
-            image.height(),
-            image.channels()
+            reader.bands()
         );
     }
+    let (first, last) = (rows.start.max(row), rows.end.min(row + height));
+    if first >= last {
+        return Ok(None);
+    }
+    let image = reader
+        .read_window(0, first - row, width, last - first)
+        .with_context(context)?;
     let d = image.data();
-    Ok(GridWindow {
+    Ok(Some(GridWindow {
         col,
-        row,
+        row: first,
         width,
-        height,
+        height: last - first,
         heights: d.iter().step_by(2).copied().collect(),
         counts: d.iter().skip(1).step_by(2).map(|&n| n as u16).collect(),
-    })
+    }))
 }
 
 #[cfg(test)]
@@ -121,17 +139,17 @@ mod tests {
         let grid = DsmGrid::new(0.0, 10.0, 1.0, 4, 1, 32617).unwrap();
         let a = part(0, vec![1.0, 5.0, 2.0], vec![1, 1, 3]);
         let b = part(1, vec![7.0, 1.0, f32::NAN], vec![1, 2, 0]);
-        let mut max = Mosaic::new(&grid, Gridding::Max);
+        let mut max = Mosaic::new(&grid, 0..1, Gridding::Max);
         max.add(&a);
         max.add(&b);
-        let m = max.into_image(&grid);
+        let m = max.into_image();
         assert_eq!(&m.data()[..3], &[1.0, 7.0, 2.0]);
         assert!(m.data()[3].is_nan());
-        let mut med = Mosaic::new(&grid, Gridding::Median);
+        let mut med = Mosaic::new(&grid, 0..1, Gridding::Median);
         med.add(&a);
         med.add(&b);
         // Cell 1: a tie (1 point each) keeps the first tile; cell 2: a has 3 points to b's 2.
-        assert_eq!(&med.into_image(&grid).data()[..3], &[1.0, 5.0, 2.0]);
+        assert_eq!(&med.into_image().data()[..3], &[1.0, 5.0, 2.0]);
     }
 
     #[test]
@@ -147,11 +165,16 @@ mod tests {
             counts: vec![2, 0, 1, 7],
         };
         write_part(&p, &a).unwrap();
-        let b = read_part(&p, (3, 4, 2, 2)).unwrap();
+        let b = read_part(&p, (3, 4, 2, 2), 0..10).unwrap().unwrap();
         assert_eq!(b.counts, a.counts);
         assert_eq!(b.heights[0], 1.5);
         assert!(b.heights[1].is_nan());
-        let msg = format!("{:#}", read_part(&p, (3, 4, 3, 2)).unwrap_err());
+        // Only the grid's row 5 (the window's second row); nothing on rows 6 and after.
+        let lower = read_part(&p, (3, 4, 2, 2), 5..9).unwrap().unwrap();
+        assert_eq!((lower.row, lower.height), (5, 1));
+        assert_eq!((lower.heights, lower.counts), (vec![3.0, 4.0], vec![1, 7]));
+        assert!(read_part(&p, (3, 4, 2, 2), 6..9).unwrap().is_none());
+        let msg = format!("{:#}", read_part(&p, (3, 4, 3, 2), 0..10).unwrap_err());
         assert!(msg.contains("delete the tile's record"), "{msg}");
     }
 }

@@ -94,7 +94,7 @@ pub struct TileRecord {
 
 impl TileRecord {
     /// A tile that has not run yet: `Done` until something says otherwise.
-    fn new(tile: &Tile, memory_bytes: u64) -> Self {
+    pub(super) fn new(tile: &Tile, memory_bytes: u64) -> Self {
         TileRecord {
             tile: tile.clone(),
             status: TileStatus::Done,

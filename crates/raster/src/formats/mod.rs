@@ -16,7 +16,7 @@ use std::path::Path;
 
 use crate::{Image, RasterError, Result};
 
-pub use self::cog::{write_cog, write_tiled_u8};
+pub use self::cog::{write_cog, write_tiled_u8, CogWriter};
 pub use self::npy::{read_npy, write_npy};
 pub use self::npz::{read_homographies, write_homographies};
 pub use self::pfm::{read_pfm, write_pfm};

@@ -1,0 +1,318 @@
+//! The DSM assembled from the tiles' cells one block of rows at a time, so that its memory does
+//! not grow with the scene: each block is merged with a halo of rows around it (as far as the
+//! hole filling and the median filter reach), finished, cropped back to the block and streamed
+//! into the DSM and its filled-cell sidecar. The bytes are those of a merge of the whole grid at
+//! once: every finished cell of a block depends only on cells inside its halo.
+
+use std::ops::Range;
+use std::path::Path;
+
+use anyhow::Result;
+use camera::{dsm_writer, DsmGrid, GridWindow, Gridding};
+use raster::formats::cog::COG_TILE;
+use raster::formats::CogWriter;
+use raster::Image;
+use rayon::prelude::*;
+
+use super::folder::TileFolder;
+use super::mosaic::Mosaic;
+use super::tile::{TileRecord, TileStatus};
+use super::{gib, ReconstructOptions};
+use crate::dsm::{filled_mask, filled_path, finish_dsm, DsmSummary};
+
+/// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
+/// block as it comes); with its halo, about 180 MiB for a 16,384-cell-wide grid with the default
+/// filling.
+pub const MERGE_BLOCK_ROWS: usize = COG_TILE;
+
+/// How the merged cells become the DSM (the options' gridding, hole filling and median filter).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Finishing {
+    pub gridding: Gridding,
+    pub fill_holes: Option<usize>,
+    pub median_filter: Option<usize>,
+}
+
+impl Finishing {
+    pub fn of(opts: &ReconstructOptions) -> Self {
+        Finishing {
+            gridding: opts.gridding,
+            fill_holes: opts.fill_holes,
+            median_filter: opts.median_filter,
+        }
+    }
+
+    /// Rows above and below a cell that its finished height depends on: the filling's rays walk
+    /// `fill_holes` cells (the diagonals as many rows), and the median reads `window / 2` rows
+    /// of filled cells.
+    pub fn halo(&self) -> usize {
+        let fill = self.fill_holes.unwrap_or(0);
+        fill.saturating_add(self.median_filter.map_or(0, |w| w / 2))
+    }
+}
+
+/// Peak bytes per cell of a block and its halo while it is finished: the mosaic (height +
+/// count), the measured, filled and filtered copies, the sidecar, and the tiles' cells read for
+/// it (height + count as float32).
+const BLOCK_BYTES_PER_CELL: u64 = 34;
+
+/// Memory the assembly of the DSM needs, bytes: one block of `block_rows` rows with its halo
+/// (the whole grid when the halo reaches past it), and the two COG writers (per level a row of
+/// tiles waiting to be complete, and a block's compressed tiles and halved rows).
+pub fn merge_memory(grid: &DsmGrid, finishing: &Finishing, block_rows: usize) -> u64 {
+    let width = grid.width as u64;
+    let halo = finishing.halo();
+    let rows = block_rows
+        .saturating_add(halo.saturating_mul(2))
+        .min(grid.height) as u64;
+    let block = rows * width * BLOCK_BYTES_PER_CELL;
+    let written = block_rows.min(grid.height) as u64;
+    // The levels' widths halve: all of them together hold at most twice level 0's rows.
+    let writer = width * 4 * (2 * (COG_TILE as u64 + 1) + 2 * written);
+    block + 2 * writer
+}
+
+/// The refusal when the assembly does not fit in `max_memory`.
+pub fn check_merge_memory(grid: &DsmGrid, merge_memory: u64, max_memory: u64) -> Result<()> {
+    if merge_memory > max_memory {
+        anyhow::bail!(
+            "assembling the {}x{}-cell DSM needs about {:.2} GiB, more than --max-memory {:.2} \
+             GiB: use a coarser --resolution, a smaller --roi, or raise --max-memory",
+            grid.width,
+            grid.height,
+            gib(merge_memory),
+            gib(max_memory)
+        );
+    }
+    Ok(())
+}
+
+/// A tile's cells on the grid: column, row, width, height.
+type Cells = (usize, usize, usize, usize);
+
+/// Merges the finished tiles' cells into the DSM at `output` (and its filled-cell sidecar),
+/// `block_rows` rows at a time, finishing it on the way (holes, median filter).
+pub fn merge_tiles(
+    finishing: &Finishing,
+    grid: &DsmGrid,
+    folder: &TileFolder,
+    records: &[TileRecord],
+    output: &Path,
+    block_rows: usize,
+) -> Result<DsmSummary> {
+    let parts: Vec<(&TileRecord, Cells)> = records
+        .iter()
+        .filter_map(|r| match (r.status, r.cells) {
+            (TileStatus::Done, Some(cells)) => Some((r, cells)),
+            _ => None,
+        })
+        .collect();
+    let points = parts.iter().map(|(r, _)| r.points).sum();
+    let sidecar = filled_path(output);
+    let mut dsm_out = Output::create(output, grid)?;
+    let mut filled_out = Output::create(&sidecar, grid)?;
+    let (mut measured_cells, mut filled_cells) = (0, 0);
+    let halo = finishing.halo();
+    for start in (0..grid.height).step_by(block_rows.max(1)) {
+        let block = start..(start + block_rows.max(1)).min(grid.height);
+        let window =
+            block.start.saturating_sub(halo)..block.end.saturating_add(halo).min(grid.height);
+        let mut mosaic = Mosaic::new(grid, window.clone(), finishing.gridding);
+        // Read in parallel, merged in the records' order (ties go to the first tile).
+        let cells: Vec<Option<GridWindow>> = parts
+            .par_iter()
+            .filter(|(_, (_, row, _, height))| *row < window.end && row + height > window.start)
+            .map(|(r, cells)| folder.cells(r, *cells, window.clone()))
+            .collect::<Result<_>>()?;
+        for part in cells.iter().flatten() {
+            mosaic.add(part);
+        }
+        let measured = mosaic.into_image();
+        let finished = finish_dsm(
+            measured.clone(),
+            finishing.fill_holes,
+            finishing.median_filter,
+        )?;
+        let core = (block.start - window.start)..(block.end - window.start);
+        let (measured, finished) = (rows_of(&measured, core.clone()), rows_of(&finished, core));
+        measured_cells += finite(&measured);
+        filled_cells += finite(&finished);
+        let filled = filled_mask(&measured, &finished)?;
+        dsm_out.write(&finished)?;
+        filled_out.write(&filled)?;
+    }
+    dsm_out.finish()?;
+    filled_out.finish()?;
+    Ok(DsmSummary {
+        points,
+        measured_cells,
+        filled_cells,
+        grid: grid.clone(),
+        comparison: None,
+    })
+}
+
+/// The rows `rows` of a one-band image.
+fn rows_of(image: &Image, rows: Range<usize>) -> Image {
+    let w = image.width();
+    let data = image.data()[rows.start * w..rows.end * w].to_vec();
+    Image::new(w, rows.len(), 1, data).expect("whole rows")
+}
+
+fn finite(image: &Image) -> usize {
+    image.data().iter().filter(|v| v.is_finite()).count()
+}
+
+/// One of the two files the merge writes, its failures told the way a rerun fixes them.
+struct Output<'a> {
+    path: &'a Path,
+    writer: CogWriter,
+}
+
+impl<'a> Output<'a> {
+    fn create(path: &'a Path, grid: &DsmGrid) -> Result<Self> {
+        let writer = dsm_writer(path, grid).map_err(|e| failed(path, e))?;
+        Ok(Output { path, writer })
+    }
+
+    fn write(&mut self, rows: &Image) -> Result<()> {
+        self.writer
+            .write_rows(rows.data())
+            .map_err(|e| failed(self.path, e))
+    }
+
+    fn finish(self) -> Result<()> {
+        self.writer.finish().map_err(|e| failed(self.path, e))
+    }
+}
+
+fn failed(path: &Path, e: impl std::fmt::Display) -> anyhow::Error {
+    crate::outputs::Incomplete::Nothing {
+        message: format!(
+            "writing {} failed: {e}; the tiles stay in the work folder: free space or fix the \
+             folder and rerun the same command",
+            path.display()
+        ),
+    }
+    .into()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::fabricated::fabricate_tiles;
+    use super::*;
+    use crate::dsm::{DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+
+    /// The merge as it was before blocks: the whole grid at once, written whole.
+    fn merge_whole_grid(
+        finishing: &Finishing,
+        grid: &DsmGrid,
+        folder: &TileFolder,
+        records: &[TileRecord],
+        output: &Path,
+    ) -> (usize, usize, usize) {
+        let mut mosaic = Mosaic::new(grid, 0..grid.height, finishing.gridding);
+        let mut points = 0;
+        for r in records {
+            if let (TileStatus::Done, Some(cells)) = (r.status, r.cells) {
+                mosaic.add(&folder.cells(r, cells, 0..grid.height).unwrap().unwrap());
+                points += r.points;
+            }
+        }
+        let measured = mosaic.into_image();
+        let finished = finish_dsm(
+            measured.clone(),
+            finishing.fill_holes,
+            finishing.median_filter,
+        )
+        .unwrap();
+        let filled = filled_mask(&measured, &finished).unwrap();
+        camera::write_dsm(output, &finished, grid).unwrap();
+        camera::write_dsm(filled_path(output), &filled, grid).unwrap();
+        (points, finite(&measured), finite(&finished))
+    }
+
+    /// Buildings, occluded strips, voids and a failed tile across blocks of 32 rows: the DSM and
+    /// its sidecar are byte for byte those of the whole-grid merge, with the same counts.
+    #[test]
+    fn blocks_of_rows_make_the_bytes_of_the_whole_grid_merge() {
+        let dir = tempfile::tempdir().unwrap();
+        let work = dir.path().join("work");
+        let made = fabricate_tiles(&work, (300, 530), 64).unwrap();
+        let folder = TileFolder::new(&work);
+        let finishings = [
+            Finishing {
+                gridding: Gridding::Median,
+                fill_holes: Some(DEFAULT_FILL_CELLS),
+                median_filter: Some(DEFAULT_MEDIAN_CELLS),
+            },
+            Finishing {
+                gridding: Gridding::Max,
+                fill_holes: Some(3),
+                median_filter: Some(5),
+            },
+            Finishing {
+                gridding: Gridding::Max,
+                fill_holes: None,
+                median_filter: None,
+            },
+        ];
+        for finishing in finishings {
+            let whole = dir.path().join("whole.tif");
+            let (points, measured, filled) =
+                merge_whole_grid(&finishing, &made.grid, &folder, &made.records, &whole);
+            assert!(measured < filled || finishing.fill_holes.is_none());
+            assert!(filled < 300 * 530, "the voids stay empty");
+            for block_rows in [32, 256] {
+                let out = dir.path().join(format!("blocks{block_rows}.tif"));
+                let s = merge_tiles(
+                    &finishing,
+                    &made.grid,
+                    &folder,
+                    &made.records,
+                    &out,
+                    block_rows,
+                )
+                .unwrap();
+                assert_eq!(
+                    (s.points, s.measured_cells, s.filled_cells),
+                    (points, measured, filled)
+                );
+                for (a, b) in [(&whole, &out), (&filled_path(&whole), &filled_path(&out))] {
+                    let same = std::fs::read(a).unwrap() == std::fs::read(b).unwrap();
+                    assert!(
+                        same,
+                        "{finishing:?}, {block_rows} rows: {} differs",
+                        b.display()
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_halo_is_the_filling_and_median_reach_and_a_huge_grid_fits_in_little_memory() {
+        let default = Finishing {
+            gridding: Gridding::Median,
+            fill_holes: Some(40),
+            median_filter: Some(7),
+        };
+        assert_eq!(default.halo(), 43);
+        let none = Finishing {
+            fill_holes: None,
+            median_filter: None,
+            ..default
+        };
+        assert_eq!(none.halo(), 0);
+        let grid = DsmGrid::new(0.0, 0.0, 0.5, 50_000, 50_000, 32617).unwrap();
+        let bytes = merge_memory(&grid, &default, MERGE_BLOCK_ROWS);
+        assert!(bytes < 1 << 30, "{bytes} bytes for 50,000² cells");
+        // A halo reaching past the grid: the whole grid is one block.
+        let small = DsmGrid::new(0.0, 0.0, 0.5, 1000, 100, 32617).unwrap();
+        let whole = merge_memory(&small, &default, MERGE_BLOCK_ROWS);
+        assert_eq!(
+            whole,
+            1000 * 100 * BLOCK_BYTES_PER_CELL + 2 * 1000 * 4 * (2 * 257 + 2 * 100)
+        );
+    }
+}
