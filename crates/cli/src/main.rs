@@ -80,7 +80,7 @@ enum Command {
     /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).
     Score(score::ScoreArgs),
     /// Time the networks (MonSter++, SegFormer, DINOv3, a training step) with random weights:
-    /// median and min over N runs after a warm-up, peak RSS, --json.
+    /// median and min over N runs after a warm-up, peak RSS, --json; or a whole-scene DSM merge.
     Bench(bench::BenchArgs),
     /// Turn a rectified disparity into a georeferenced DSM (RPC triangulation, highest point per
     /// cell), on a ground truth's grid or on a UTM grid of your choosing.
