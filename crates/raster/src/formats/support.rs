@@ -1,10 +1,11 @@
 //! What the codecs share: atomic writes, whole-file reads, and a decoder's panic or an
 //! implausible size turned into an error naming the file.
 
+use std::ffi::{OsStr, OsString};
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::{RasterError, Result};
@@ -16,7 +17,6 @@ pub fn write_atomically(
     path: impl AsRef<Path>,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> Result<()> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
     let path = path.as_ref();
     let err = |e| RasterError::io(path, e);
     let name = path.file_name().ok_or_else(|| {
@@ -30,21 +30,7 @@ pub fn write_atomically(
         _ => Path::new("."),
     };
     fs::create_dir_all(dir).map_err(err)?;
-    let (tmp, file) = loop {
-        let mut tmp_name = std::ffi::OsString::from(".");
-        tmp_name.push(name);
-        tmp_name.push(format!(
-            ".tmp{}-{}",
-            std::process::id(),
-            COUNTER.fetch_add(1, Ordering::Relaxed)
-        ));
-        let tmp = dir.join(tmp_name);
-        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
-            Ok(f) => break (tmp, f),
-            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-            Err(e) => return Err(err(e)),
-        }
-    };
+    let (tmp, file) = create_hidden_beside(dir, name, "tmp").map_err(err)?;
     let result = (|| {
         let mut w = BufWriter::new(file);
         write(&mut w)?;
@@ -58,6 +44,37 @@ pub fn write_atomically(
         return Err(err(e));
     }
     Ok(())
+}
+
+/// A new file `.<name>.<kind><pid>-<n>` in `dir`, open for reading and writing, never one that
+/// exists: the hidden scratch files written beside an output (`tmp` for the atomic writes,
+/// `spool` for a COG's parked tiles), unique across threads and processes.
+pub(crate) fn create_hidden_beside(
+    dir: &Path,
+    name: &OsStr,
+    kind: &str,
+) -> io::Result<(PathBuf, File)> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    loop {
+        let mut hidden = OsString::from(".");
+        hidden.push(name);
+        hidden.push(format!(
+            ".{kind}{}-{}",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let path = dir.join(hidden);
+        let open = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path);
+        match open {
+            Ok(file) => return Ok((path, file)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
 }
 
 /// Reads a whole file, as an I/O error naming it.

@@ -2,10 +2,11 @@
 //! directories that come first in a COG need every tile's length, and holding the tiles of a
 //! whole-scene DSM in memory would cost as much as the DSM.
 
-use std::fs::{self, File, OpenOptions};
+use std::fs::{self, File};
 use std::io::{self, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::formats::support::create_hidden_beside;
 
 /// A temporary file, removed when dropped.
 pub(super) struct Spool {
@@ -17,27 +18,8 @@ impl Spool {
     /// A new empty spool in `dir`, named after the output `name` (hidden, like the atomic
     /// writer's temporary file).
     pub fn create(dir: &Path, name: &std::ffi::OsStr) -> io::Result<Self> {
-        static COUNTER: AtomicU64 = AtomicU64::new(0);
-        loop {
-            let mut spool_name = std::ffi::OsString::from(".");
-            spool_name.push(name);
-            spool_name.push(format!(
-                ".spool{}-{}",
-                std::process::id(),
-                COUNTER.fetch_add(1, Ordering::Relaxed)
-            ));
-            let path = dir.join(spool_name);
-            match OpenOptions::new()
-                .read(true)
-                .write(true)
-                .create_new(true)
-                .open(&path)
-            {
-                Ok(file) => return Ok(Spool { path, file }),
-                Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-                Err(e) => return Err(e),
-            }
-        }
+        let (path, file) = create_hidden_beside(dir, name, "spool")?;
+        Ok(Spool { path, file })
     }
 
     pub fn append(&mut self, bytes: &[u8]) -> io::Result<()> {
