@@ -119,6 +119,11 @@ impl Fixture {
             .unwrap_or_else(|| panic!("fixture has no tensor {name}"))
     }
 
+    /// max |output.depth_mono|: bounds the mono disparity that the scale/shift align.
+    pub fn mono_max(&self) -> f32 {
+        max_abs(&self.raw("output.depth_mono").1)
+    }
+
     /// Tensor `name` with its rank checked.
     pub fn t<const N: usize>(&self, name: &str) -> Tensor<N> {
         let (shape, values) = self.raw(name);
