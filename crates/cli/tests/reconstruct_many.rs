@@ -73,6 +73,16 @@ fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
             p["scores"]["coverage"].as_f64().unwrap()
         })
         .fold(0.0, f64::max);
+    // Every pair was compared with the equal-weight fusion and weighted by its agreement^8.
+    for p in pairs {
+        let a = &p["agreement"];
+        let compared = a["compared"].as_f64().unwrap();
+        let share = a["agreeing"].as_f64().unwrap() / compared;
+        assert!(compared > 1e4 && share > 0.5, "{p}");
+        let weight = p["weight"].as_f64().unwrap();
+        assert!((weight - share.powi(8)).abs() < 1e-5, "{p}");
+    }
+    assert!(stdout.contains("agrees with the fusion on"), "{stdout}");
     let coverage = report["scores"]["coverage"].as_f64().unwrap();
     let mae = report["scores"]["mae_filtered"].as_f64().unwrap();
     assert!(

@@ -63,7 +63,7 @@ pub use pipeline::jobs::{
 pub use pipeline::matcher::MonsterOptions;
 pub use pipeline::matcher::{Matched, Matcher, RangeSource};
 pub use pipeline::outputs::Incomplete;
-pub use pipeline::reconstruct::fuse::FusionParams;
+pub use pipeline::reconstruct::fuse::{Agreement, FusionParams};
 pub use pipeline::reconstruct::many::{
     auto_min_support, FusedOutcome, PairOutcome, PairStatus, ReconstructManyOptions,
     ReconstructManySummary, DEFAULT_PAIRS,

@@ -33,7 +33,7 @@ use dataset::shard::Shard;
 use raster::Image;
 use serde::Serialize;
 
-use super::fuse::{fuse_files, Fused, FusionParams, Shift};
+use super::fuse::{fuse_files, pair_weight, Agreement, Fused, FusionParams, Shift};
 use super::raw::RawImage;
 use super::select::{
     choose_pairs, json_metadata, parse_day, rank_pairs, Acquisition, PairChoice, View,
@@ -75,6 +75,9 @@ pub struct ReconstructManyOptions {
     pub min_support: Option<usize>,
     /// Register every pair's DSM on the first pair's (NCC shift, vertical offset) before fusing.
     pub co_register: bool,
+    /// Weight each pair by its agreement with a first, equal-weight fusion ([`pair_weight`]);
+    /// false fuses once with equal weights.
+    pub weight_pairs: bool,
     /// Hole filling of the fused DSM, cells (only cells without a fused height are filled).
     pub fill_holes: Option<usize>,
     /// Median filter of the fused DSM, cells (odd).
@@ -101,8 +104,8 @@ pub struct ReconstructManyOptions {
 pub const DEFAULT_PAIRS: usize = 12;
 
 impl ReconstructManyOptions {
-    /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_support`], no
-    /// co-registration, fill 40 cells, 7×7 median.
+    /// The defaults: the best 12 pairs, 0.4 m clusters, agreement by [`auto_min_support`], no
+    /// co-registration, pairs weighted by their agreement, fill 40 cells, 7×7 median.
     pub fn new(
         images: Vec<PathBuf>,
         rpc_dir: Option<PathBuf>,
@@ -121,6 +124,7 @@ impl ReconstructManyOptions {
             cluster_tolerance: FusionParams::default().tolerance,
             min_support: None,
             co_register: false,
+            weight_pairs: true,
             fill_holes: Some(DEFAULT_FILL_CELLS),
             median_filter: Some(FUSED_MEDIAN_CELLS),
             pair_median_filter: None,
@@ -191,6 +195,10 @@ pub struct PairOutcome {
     pub scores: Option<DsmScores>,
     /// How the pair's DSM was moved onto the reference pair's before fusion.
     pub registration: Option<Shift>,
+    /// How often the pair agreed with the equal-weight fusion, and its weight in the fusion
+    /// that was kept.
+    pub agreement: Option<Agreement>,
+    pub weight: Option<f32>,
     pub seconds: f64,
 }
 
@@ -383,7 +391,18 @@ fn fuse_pairs(
             .unwrap_or_else(|| auto_min_support(layers.len())),
     };
     summary.fusion = Some(params);
-    let fused = fuse_files(&layers, grid, rows, &params, progress)?;
+    let equal = vec![1.0; layers.len()];
+    let mut fused = fuse_files(&layers, &equal, grid, rows, &params, progress)?;
+    let agreement = std::mem::take(&mut fused.agreement);
+    let weights: Vec<f32> = agreement.iter().map(pair_weight).collect();
+    if opts.weight_pairs {
+        fused = fuse_files(&layers, &weights, grid, rows, &params, progress)?;
+    }
+    for (k, &i) in fusable.iter().enumerate() {
+        let p = &mut summary.pairs[i];
+        p.agreement = Some(agreement[k]);
+        p.weight = Some(if opts.weight_pairs { weights[k] } else { 1.0 });
+    }
     summary.fused = Some(write_fused(opts, fused, grid, layers.len(), t)?);
     if let Some(path) = &opts.truth {
         summary.scores = Some(score_against_truth(&opts.output, path, grid)?);
@@ -481,6 +500,8 @@ fn run_pair(
         measured_share: 0.0,
         scores: None,
         registration: None,
+        agreement: None,
+        weight: None,
         seconds: 0.0,
     };
     match reconstruct(o, progress) {
