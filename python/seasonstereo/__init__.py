@@ -183,7 +183,7 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
     RPC tags), reconstructs the best ``pairs`` and fuses them into ``out`` (with
     ``<out>_count.tif``, ``<out>_spread.tif`` and ``<out>_report.json`` beside it). Options, with
     the command's defaults: ``pairs``, ``dry_run`` (choose the pairs, write nothing),
-    ``cluster_tolerance``, ``min_support``, ``register``, ``equal_weights``, ``fill_holes``,
+    ``cluster_tolerance``, ``min_support``, ``register``, ``pair_weights``, ``fill_holes``,
     ``median_filter``, ``pair_median_filter``, ``work``, ``like``, ``resolution``, ``epsg``,
     ``truth``,
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
@@ -191,7 +191,7 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
 
     Returns the report's content: ``views``, ``candidates``, ``chosen`` (pairs with their score
     ``terms``), ``pairs`` (each pair's status, DSM, coverage, scores, agreement with the
-    equal-weight fusion and weight, seconds), ``fused`` (files,
+    equal-weight fusion and weight in the fusion, seconds), ``fused`` (files,
     grid with ``transform`` and ``crs``, coverage; None on a dry run), ``scores``, ``seconds``
     and ``warnings`` (incomplete pairs, also issued as Python warnings). Fewer than two images
     raise ``ValueError``; existing outputs ``FileExistsError`` unless ``overwrite=True`` (or an

@@ -109,7 +109,7 @@ def reconstruct_many(
     cluster_tolerance: Optional[float] = None,
     min_support: Optional[int] = None,
     register: Optional[bool] = None,
-    equal_weights: Optional[bool] = None,
+    pair_weights: Optional[bool] = None,
     fill_holes: Optional[int] = None,
     median_filter: Optional[int] = None,
     pair_median_filter: Optional[int] = None,

@@ -65,7 +65,7 @@ fn many_options(
     o.cluster_tolerance = k.take("cluster_tolerance")?.unwrap_or(o.cluster_tolerance);
     o.min_support = k.take("min_support")?;
     o.co_register = k.take("register")?.unwrap_or(false);
-    o.weight_pairs = !k.take("equal_weights")?.unwrap_or(false);
+    o.weight_pairs = k.take("pair_weights")?.unwrap_or(false);
     k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
     if let Some(cells) = k.take("pair_median_filter")? {
         o.pair_median_filter = flags::median_cells(cells);

@@ -26,9 +26,18 @@ pub struct WorldArgs {
     /// `seasonstereo reconstruct` (with --rpc-left/--rpc-right rpc/<ID>.json).
     #[arg(long)]
     raw: bool,
+    /// Instead of one pair, render the same scene on six dates of a year (spring, summer and
+    /// winter, two acquisitions a week apart from opposite sides each; the sun and the seasonal
+    /// colours change, the geometry does not): raw/<NAME>_D1..D6.tif, their cameras with dates
+    /// and sun angles in rpc/, and truth/<NAME>_DSM.tif — the input of `reconstruct-many`.
+    #[arg(long, conflicts_with = "raw")]
+    dates: bool,
 }
 
 pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
+    if a.dates {
+        return run_dates(a, progress);
+    }
     let params = world::WorldParams::new(a.size, a.seed);
     let world = track(progress, "rendering the world", a.size, |cb| {
         world::generate(&params, &world::Neutral, cb)
@@ -48,6 +57,37 @@ pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
         a.size,
         a.size,
         100.0 * world.occluded.count() as f64 / (a.size * a.size) as f64
+    );
+    Ok(())
+}
+
+/// `--dates`: the multi-date stack.
+fn run_dates(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
+    use pipeline::world_dates::{write_dated_stack, ACQUISITIONS};
+    let name = a.name.unwrap_or_else(|| format!("WORLD_{}", a.seed));
+    let stack = write_dated_stack(a.size, a.seed, &name, &ACQUISITIONS, &a.output, progress)?;
+    for (path, acq) in stack.images.iter().zip(&ACQUISITIONS) {
+        println!(
+            "{} {} {}, {:+.2} px/m, sun {:.0}° at {:.0}°",
+            path.display(),
+            &acq.date[..8],
+            acq.season,
+            acq.slope,
+            acq.sun_elevation_deg,
+            acq.sun_azimuth_deg
+        );
+    }
+    println!(
+        "wrote {} acquisitions of {name} to {} (cameras {}, truth {}); fuse them with\n  \
+         seasonstereo reconstruct-many {}/raw/*.tif --rpc-dir {} --like {} --truth {} -o DSM.tif",
+        stack.images.len(),
+        a.output.display(),
+        stack.rpc_dir.display(),
+        stack.truth.display(),
+        a.output.display(),
+        stack.rpc_dir.display(),
+        stack.truth.display(),
+        stack.truth.display()
     );
     Ok(())
 }

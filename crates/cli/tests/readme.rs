@@ -41,6 +41,11 @@ const PLANS: &[(&str, Plan)] = &[
         "seasonstereo reconstruct-many $D/images/*.tif",
         Skip("12 pairs, about a minute; tests/reconstruct_many.rs runs 4 images, 3 pairs"),
     ),
+    ("seasonstereo world --dates --size 384", Run),
+    (
+        "seasonstereo reconstruct-many out/world-dates/raw/*.tif",
+        Run,
+    ),
     (
         "seasonstereo jobs slurm reconstruct left.tif",
         Skip("needs a Slurm cluster: tests/jobs.rs runs it against a fake sbatch"),

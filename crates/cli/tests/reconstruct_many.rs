@@ -73,14 +73,13 @@ fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
             p["scores"]["coverage"].as_f64().unwrap()
         })
         .fold(0.0, f64::max);
-    // Every pair was compared with the equal-weight fusion and weighted by its agreement^8.
+    // Every pair was compared with the fusion; the weights are equal by default.
     for p in pairs {
         let a = &p["agreement"];
         let compared = a["compared"].as_f64().unwrap();
         let share = a["agreeing"].as_f64().unwrap() / compared;
         assert!(compared > 1e4 && share > 0.5, "{p}");
-        let weight = p["weight"].as_f64().unwrap();
-        assert!((weight - share.powi(8)).abs() < 1e-5, "{p}");
+        assert_eq!(p["weight"].as_f64(), Some(1.0), "{p}");
     }
     assert!(stdout.contains("agrees with the fusion on"), "{stdout}");
     let coverage = report["scores"]["coverage"].as_f64().unwrap();
@@ -107,6 +106,125 @@ fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
         std::fs::metadata(&record).unwrap().modified().unwrap(),
         before
     );
+}
+
+/// The report's scores of a DSM: MAE filtered, coverage, within 1 m.
+fn scores(v: &serde_json::Value) -> (f64, f64, f64) {
+    let get = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("no {k} in {v}"));
+    (get("mae_filtered"), get("coverage"), get("within_1m"))
+}
+
+/// The procedural world on six dates (`world --dates`): the selection puts the three
+/// same-season pairs first, and the fused DSM of six pairs beats the best of them through
+/// `reconstruct` against the exact truth: lower MAE, more cells within 1 m, as much coverage.
+/// `--pair-weights` weights each pair by its agreement to the 8th power.
+#[test]
+fn a_six_date_world_fuses_better_than_its_best_pair() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = dir.path().join("world");
+    let o = seasonstereo(&[
+        "world",
+        "--dates",
+        "--size",
+        "384",
+        "-o",
+        world.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let truth = world.join("truth/WORLD_1_DSM.tif");
+    let truth = truth.to_str().unwrap();
+    let rpc = world.join("rpc");
+    let images: Vec<String> = (1..=6)
+        .map(|k| {
+            let p = world.join(format!("raw/WORLD_1_D{k}.tif"));
+            assert!(rpc.join(format!("WORLD_1_D{k}.json")).is_file());
+            p.to_str().unwrap().to_string()
+        })
+        .collect();
+    let fused = dir.path().join("fused.tif");
+    let mut args: Vec<&str> = vec!["reconstruct-many"];
+    args.extend(images.iter().map(String::as_str));
+    args.extend([
+        "--rpc-dir",
+        rpc.to_str().unwrap(),
+        "--pairs",
+        "6",
+        "--like",
+        truth,
+        "--truth",
+        truth,
+        "-o",
+        fused.to_str().unwrap(),
+    ]);
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let read = |p: PathBuf| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let report = read(dir.path().join("fused_report.json"));
+    let chosen = report["chosen"].as_array().unwrap();
+    for c in &chosen[..3] {
+        assert!(c["terms"]["days"].as_f64().unwrap() <= 7.0, "{c}");
+    }
+    let (mae, coverage, within) = scores(&report["scores"]);
+
+    // The best-scored pair alone, through `reconstruct` with its defaults (filled, median).
+    let (l, r) = (
+        chosen[0]["left"].as_u64().unwrap(),
+        chosen[0]["right"].as_u64().unwrap(),
+    );
+    let single = dir.path().join("single.tif");
+    let json = dir.path().join("single.json");
+    let camera = |i: u64| rpc.join(format!("WORLD_1_D{}.json", i + 1));
+    let o = seasonstereo(&[
+        "reconstruct",
+        &images[l as usize],
+        &images[r as usize],
+        "--rpc-left",
+        camera(l).to_str().unwrap(),
+        "--rpc-right",
+        camera(r).to_str().unwrap(),
+        "--like",
+        truth,
+        "-o",
+        single.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = seasonstereo(&[
+        "score",
+        single.to_str().unwrap(),
+        "--truth",
+        truth,
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (single_mae, single_coverage, single_within) = scores(&read(json));
+    assert!(
+        mae < single_mae && within > single_within && coverage > single_coverage - 0.005,
+        "fused {mae} m, {coverage} covered, {within} within 1 m; best pair {single_mae} m, \
+         {single_coverage}, {single_within}"
+    );
+
+    // With --pair-weights (the pairs' DSMs are reused) every weight is agreement^8.
+    let weighted = dir.path().join("weighted.tif");
+    let work = dir.path().join("fused_work");
+    let mut args: Vec<&str> = args[..args.len() - 1].to_vec();
+    args.extend([
+        weighted.to_str().unwrap(),
+        "--work",
+        work.to_str().unwrap(),
+        "--pair-weights",
+    ]);
+    let o = seasonstereo(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = read(dir.path().join("weighted_report.json"));
+    for p in report["pairs"].as_array().unwrap() {
+        let a = &p["agreement"];
+        let share = a["agreeing"].as_f64().unwrap() / a["compared"].as_f64().unwrap();
+        let weight = p["weight"].as_f64().unwrap();
+        assert!((weight - share.powi(8)).abs() < 1e-5, "{p}");
+    }
 }
 
 /// Pairs that fail are named: exit 2 when the others give a DSM, 3 (nothing written) when none

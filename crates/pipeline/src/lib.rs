@@ -26,6 +26,7 @@ pub mod report;
 pub mod score;
 pub mod stage;
 pub mod stages;
+pub mod world_dates;
 pub mod world_io;
 
 pub use progress::{Progress, Silent};

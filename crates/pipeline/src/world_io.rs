@@ -32,7 +32,7 @@ use camera::{DsmGrid, Points, UtmZone};
 use raster::formats::{
     write_geotiff, write_homographies, write_npy, write_png, GeoTiffMeta, PngDepth,
 };
-use raster::Image;
+use raster::{Homography, Image};
 use serde_json::json;
 use world::World;
 
@@ -68,15 +68,6 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
         PngDepth::Eight,
     )?;
 
-    let geo = &world.geo;
-    let (lon_c, lat_c) = geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
-    let (lon_0, lat_0) = geo.lonlat(0.0, 0.0);
-    let half = ((lon_c - lon_0).abs() * 1.2, (lat_c - lat_0).abs() * 1.2);
-    let (d_lo, d_hi) = world.disparity_range();
-    let alt_range = (
-        -1.0,
-        world.params.scene.relief_m + world::scene::MAX_OBJECT_HEIGHT_M + 1.0,
-    );
     for (id, view, camera) in [
         (&left_id, &world.left, &world.camera_left),
         (&right_id, &world.right, &world.camera_right),
@@ -86,9 +77,12 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
             &view.classes,
             PngDepth::Eight,
         )?;
-        let json = camera.to_satnerf_json(id, w, h, (lon_c, lat_c), half, alt_range);
-        write_json(&root.join("rpc").join(format!("{id}.json")), &json)?;
+        write_json(
+            &root.join("rpc").join(format!("{id}.json")),
+            &camera_json(world, camera, id),
+        )?;
     }
+    let (d_lo, d_hi) = world.disparity_range();
     let aoi = AoiRule::default().aoi_of(&left_id);
     write_world_truth(world, &TruthFiles::new(&root.join("truth"), &aoi))?;
     let p = &world.params;
@@ -117,32 +111,53 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
 /// the world's truth DSM scores the result. Returns the left and right paths.
 pub fn save_raw_views(world: &World, root: &Path, name: &str) -> Result<(PathBuf, PathBuf)> {
     let (left_id, right_id) = image_ids(name)?;
-    let (w, h) = world.left.image.size();
-    let meta = GeoTiffMeta {
-        nodata: Some(0.0),
-        ..GeoTiffMeta::default()
-    };
     let mut paths = Vec::new();
     for (id, view, rectify) in [
         (&left_id, &world.left, &world.rectify_left),
         (&right_id, &world.right, &world.rectify_right),
     ] {
-        let inverse = rectify
-            .inverse()
-            .context("the world's rectifying homography is singular")?;
-        let (mut raw, inside) = raster::geometry::warp_homography(&view.image, &inverse, w, h)?;
-        let c = raw.channels();
-        for (px, &ok) in raw.data_mut().chunks_exact_mut(c).zip(inside.data()) {
-            // 0 is nodata: rendered pixels keep at least 1.
-            px.iter_mut()
-                .for_each(|v| *v = if ok { v.round().clamp(1.0, 255.0) } else { 0.0 });
-        }
         let path = root.join("raw").join(format!("{id}.tif"));
-        raster::formats::write_tiled_u8(&path, &raw, &meta)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_raw_view(&view.image, rectify, &path)?;
         paths.push(path);
     }
     Ok((paths[0].clone(), paths[1].clone()))
+}
+
+/// Writes a rectified view `image` back in the raw geometry of `rectify` (raw → rectified) as a
+/// tiled uint8 GeoTIFF at `path`, 0 (nodata) outside the rendered area.
+pub fn write_raw_view(image: &Image, rectify: &Homography, path: &Path) -> Result<()> {
+    let (w, h) = image.size();
+    let inverse = rectify
+        .inverse()
+        .context("the world's rectifying homography is singular")?;
+    let (mut raw, inside) = raster::geometry::warp_homography(image, &inverse, w, h)?;
+    let c = raw.channels();
+    for (px, &ok) in raw.data_mut().chunks_exact_mut(c).zip(inside.data()) {
+        // 0 is nodata: rendered pixels keep at least 1.
+        px.iter_mut()
+            .for_each(|v| *v = if ok { v.round().clamp(1.0, 255.0) } else { 0.0 });
+    }
+    let meta = GeoTiffMeta {
+        nodata: Some(0.0),
+        ..GeoTiffMeta::default()
+    };
+    raster::formats::write_tiled_u8(path, &raw, &meta)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// One raw camera of `world` (its left or right one) as a SatNeRF/rpcm JSON named `id`: a
+/// degree-1 RPC valid over the world's footprint and altitudes.
+pub fn camera_json(world: &World, camera: &world::AffineCamera, id: &str) -> serde_json::Value {
+    let (w, h) = world.disparity.size();
+    let geo = &world.geo;
+    let (lon_c, lat_c) = geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
+    let (lon_0, lat_0) = geo.lonlat(0.0, 0.0);
+    let half = ((lon_c - lon_0).abs() * 1.2, (lat_c - lat_0).abs() * 1.2);
+    let alt_range = (
+        -1.0,
+        world.params.scene.relief_m + world::scene::MAX_OBJECT_HEIGHT_M + 1.0,
+    );
+    camera.to_satnerf_json(id, w, h, (lon_c, lat_c), half, alt_range)
 }
 
 /// DFC2019 class of an OpenEarthMap id of the world: tree → 5 (foliage), water → 9, building → 6,

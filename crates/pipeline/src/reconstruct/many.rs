@@ -76,7 +76,7 @@ pub struct ReconstructManyOptions {
     /// Register every pair's DSM on the first pair's (NCC shift, vertical offset) before fusing.
     pub co_register: bool,
     /// Weight each pair by its agreement with a first, equal-weight fusion ([`pair_weight`]);
-    /// false fuses once with equal weights.
+    /// false (the default) keeps that equal-weight fusion.
     pub weight_pairs: bool,
     /// Hole filling of the fused DSM, cells (only cells without a fused height are filled).
     pub fill_holes: Option<usize>,
@@ -104,8 +104,8 @@ pub struct ReconstructManyOptions {
 pub const DEFAULT_PAIRS: usize = 12;
 
 impl ReconstructManyOptions {
-    /// The defaults: the best 12 pairs, 0.4 m clusters, agreement by [`auto_min_support`], no
-    /// co-registration, pairs weighted by their agreement, fill 40 cells, 7×7 median.
+    /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_support`], no
+    /// co-registration, equal weights, fill 40 cells, 7×7 median.
     pub fn new(
         images: Vec<PathBuf>,
         rpc_dir: Option<PathBuf>,
@@ -124,7 +124,7 @@ impl ReconstructManyOptions {
             cluster_tolerance: FusionParams::default().tolerance,
             min_support: None,
             co_register: false,
-            weight_pairs: true,
+            weight_pairs: false,
             fill_holes: Some(DEFAULT_FILL_CELLS),
             median_filter: Some(FUSED_MEDIAN_CELLS),
             pair_median_filter: None,
