@@ -76,6 +76,21 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
             p.dsm.path.display()
         );
     }
+    let m = &s.many_dates;
+    println!(
+        "six dates ({}² px), {} pairs fused: DSM MAE {} filtered, coverage {}, within 1 m {}; the \
+         best-scored pair alone ({}): {}, {}, {} ({})",
+        m.size,
+        m.chosen.len(),
+        metres(m.fused.mae_filtered),
+        percent(m.fused.coverage),
+        percent(m.fused.within_1m),
+        m.best_pair.0,
+        metres(m.best_pair.1.mae_filtered),
+        percent(m.best_pair.1.coverage),
+        percent(m.best_pair.1.within_1m),
+        m.folder.display()
+    );
     let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
     println!("report: {} ({total:.1} s)", s.report.display());
     Ok(())

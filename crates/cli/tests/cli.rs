@@ -104,6 +104,19 @@ fn demo_writes_a_report() {
         stdout.contains("synchronic pair:") && stdout.contains("winter ↔ summer pair:"),
         "{stdout}"
     );
+    // The six-date step: its section, its stack and both DSMs (how the fusion compares with the
+    // best pair is tested at a size where it means something, in reconstruct_many.rs).
+    assert!(html.contains("7. Many dates, one DSM"), "no many-dates section");
+    assert!(stdout.contains("six dates (128² px), 6 pairs fused"), "{stdout}");
+    for f in [
+        "dates/raw/WORLD_1_D6.tif",
+        "dates/rpc/WORLD_1_D1.json",
+        "dates/fused.tif",
+        "dates/fused_report.json",
+        "dates/best_pair.tif",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
     // The report's `score` command scores the demo's DSMs as the demo did.
     let truth = out.join("world/truth/WORLD_1_DSM.tif");
     let dsm = out.join("dsm/cross_season.tif");

@@ -2,7 +2,8 @@
 //! render a pair, vary its appearance through the four seasons with the built-in model (geometry
 //! untouched), match the synchronic pair and a winter↔summer pair, triangulate both disparities
 //! through the RPC cameras into DSMs, score them against the truth DSM with the benchmark's
-//! protocol, and write an HTML report. Offline, CPU only, deterministic.
+//! protocol; then the same world on six dates, its pairs chosen and fused into one DSM against the
+//! best pair alone; and write an HTML report. Offline, CPU only, deterministic.
 
 #[cfg(feature = "network")]
 pub mod ablation;
@@ -11,6 +12,7 @@ mod dsms;
 mod figures;
 mod format;
 mod laps;
+mod many_dates;
 mod report;
 mod summary;
 
@@ -32,6 +34,7 @@ use report::{write_report, ReportContext};
 
 pub use figures::{dsm_picture, hillshade, thumbnail};
 pub use format::{matcher_flags, metres, percent, pixels};
+pub use many_dates::{ChosenPair, ManyDatesResult, MANY_DATES_SIZE};
 pub use summary::{DemoOptions, DemoSummary, DsmResult, PairResult};
 
 /// The `season` variant of one view of a world (image id `id`) by the built-in appearance model,
@@ -120,6 +123,9 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
             cross_path,
         ),
     ];
+    let many_dates = many_dates::run_many_dates(opts, &matcher, progress)?;
+    laps.lap("six dates: render, reconstruct and fuse 6 pairs, the best pair alone");
+
     let report = out.join("report.html");
     let context = ReportContext {
         opts,
@@ -133,6 +139,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
         &report,
         &context,
         &pairs,
+        &many_dates,
         [&sync_scores.errors, &cross_scores.errors],
         [&dsm_errors[0], &dsm_errors[1]],
         &laps.seconds,
@@ -142,6 +149,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoSumma
         by_class: sync_scores.by_class,
         pairs,
         range,
+        many_dates,
         seconds: laps.seconds,
         report,
     })

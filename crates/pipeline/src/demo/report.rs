@@ -10,6 +10,8 @@ use synth::Season;
 use super::dsms::{DFC_CLASSES, DSM_ERROR_MAX};
 use super::format::{matcher_flags, metres, percent, pixels};
 use super::summary::{DemoOptions, PairResult};
+use super::ManyDatesResult;
+use crate::eval::metrics::DsmScores;
 use crate::metrics::DisparityScores;
 use crate::pairs::PairPaths;
 use crate::report::Report;
@@ -30,6 +32,7 @@ pub fn write_report(
     path: &Path,
     c: &ReportContext<'_>,
     pairs: &[PairResult],
+    many_dates: &ManyDatesResult,
     disparity_errors: [&Image; 2],
     dsm_errors: [&Image; 2],
     seconds: &[(String, f64)],
@@ -45,8 +48,9 @@ pub fn write_report(
     dsm_scores_by_class(&mut r, sync, cross);
     dsm_error_histograms(&mut r, dsm_errors);
     disparity_scores_by_class(&mut r, pairs, disparity_errors);
+    many_dates_section(&mut r, many_dates);
     matcher_and_timings(&mut r, c.opts, seconds);
-    reproduce(&mut r, c)?;
+    reproduce(&mut r, c, many_dates)?;
     r.write(path)
 }
 
@@ -292,8 +296,72 @@ fn matcher_and_timings(r: &mut Report, opts: &DemoOptions, seconds: &[(String, f
     r.table(&["step", "wall clock"], &rows);
 }
 
+/// 7: the six-date world, its chosen pairs and the fused DSM against the best pair alone.
+fn many_dates_section(r: &mut Report, m: &ManyDatesResult) {
+    r.heading("7. Many dates, one DSM");
+    r.paragraph(&format!(
+        "The same scene on six dates of a year ({s}×{s} px): spring, summer and winter, two \
+         acquisitions a week apart from opposite sides in each season. The sun moves the shadows \
+         and the built-in model recolours each season; the geometry never changes. \
+         `reconstruct-many` scores the fifteen pairs from the cameras alone (date gap, convergence, \
+         incidence, sun), reconstructs the best {n} without filling, and fuses them cell by cell \
+         (clusters of agreeing heights, at least 2 pairs agreeing; the rest filled, then a median).",
+        s = m.size,
+        n = m.chosen.len()
+    ));
+    let rows: Vec<Vec<String>> = m
+        .chosen
+        .iter()
+        .map(|c| {
+            let s = c.scores.as_ref();
+            vec![
+                c.stem.clone(),
+                c.days.map_or("?".into(), |d| format!("{d:.0}")),
+                format!("{:.1}°", c.convergence_deg),
+                format!("{:.3}", c.score),
+                s.map_or("–".into(), |s| metres(s.mae_filtered)),
+                s.map_or("–".into(), |s| percent(s.coverage)),
+            ]
+        })
+        .collect();
+    r.table(
+        &[
+            "chosen pair",
+            "days apart",
+            "convergence",
+            "score",
+            "its DSM's MAE (unfilled)",
+            "its coverage",
+        ],
+        &rows,
+    );
+    let row = |name: &str, s: &DsmScores| {
+        vec![
+            name.to_string(),
+            metres(s.mae_filtered),
+            percent(s.coverage),
+            percent(s.within_1m),
+        ]
+    };
+    r.table(
+        &["DSM", "MAE (filtered)", "coverage", "within 1 m"],
+        &[
+            row(&format!("fused, {} pairs", m.chosen.len()), &m.fused),
+            row(
+                &format!("best-scored pair alone ({}), `reconstruct`", m.best_pair.0),
+                &m.best_pair.1,
+            ),
+        ],
+    );
+    r.paragraph(&format!(
+        "Files under `{}`: the stack (`raw/`, `rpc/`, `truth/`, as `seasonstereo world --dates` \
+         writes it), `fused.tif` with its count, spread and report, and `best_pair.tif`.",
+        m.folder.display()
+    ));
+}
+
 /// The commands that reproduce the report, step by step, and run it on real data.
-fn reproduce(r: &mut Report, c: &ReportContext<'_>) -> Result<()> {
+fn reproduce(r: &mut Report, c: &ReportContext<'_>, m: &ManyDatesResult) -> Result<()> {
     let opts = c.opts;
     r.heading("Reproduce");
     let out = opts.out_dir.display().to_string();
@@ -304,6 +372,12 @@ fn reproduce(r: &mut Report, c: &ReportContext<'_>) -> Result<()> {
     let flags = matcher_flags(&opts.sgm);
     let truth = c.truth_dsm.display().to_string();
     let (lo, hi) = c.range;
+    let dates = m.folder.display().to_string();
+    let dates_truth = m
+        .folder
+        .join("truth")
+        .join(format!("WORLD_{}_DSM.tif", opts.seed));
+    let dates_truth = dates_truth.display();
     let dsm_cmd = |disparity: &str, dsm: &str| {
         format!(
             "seasonstereo dsm {disparity} --homography {world}/homography/{stem}.npz \
@@ -343,6 +417,16 @@ fn reproduce(r: &mut Report, c: &ReportContext<'_>) -> Result<()> {
         format!("seasonstereo score {out}/dsm/synchronic.tif {out}/dsm/cross_season.tif --truth {truth}"),
         "# the benchmark's whole protocol on the world's synchronic pair (Table 1 layout)".to_string(),
         format!("seasonstereo eval --world {world}{flags} -o {out}/eval"),
+        "# section 7: the six-date world, its fused DSM and its best pair alone".to_string(),
+        format!(
+            "seasonstereo world --dates --size {} --seed {} -o {dates}",
+            m.size, opts.seed
+        ),
+        format!(
+            "seasonstereo reconstruct-many {dates}/raw/*.tif --rpc-dir {dates}/rpc --pairs {}{flags} \\\n    \
+             --like {dates_truth} --truth {dates_truth} -o {dates}/fused.tif",
+            m.chosen.len()
+        ),
     ]
     .join("\n"));
     r.paragraph("On your own data (raw images and RPCs; a truth DSM <AOI>_DSM.tif with <AOI>_CLS.tif beside it):");

@@ -55,6 +55,8 @@ pub struct DemoSummary {
     pub pairs: Vec<PairResult>,
     /// Disparity range searched (from the cameras).
     pub range: (i32, i32),
+    /// The six-date world: chosen pairs, fused DSM, the best pair alone.
+    pub many_dates: super::ManyDatesResult,
     /// Wall-clock seconds per step.
     pub seconds: Vec<(String, f64)>,
     pub report: PathBuf,
