@@ -182,22 +182,13 @@ fn world_altitudes_are_exact() {
     )
     .unwrap();
     let (w, h) = world.disparity.size();
-    // The cameras exactly as the world writer stores them (crates/pipeline/src/world_io.rs).
-    let geo = &world.geo;
-    let (lon_c, lat_c) = geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
-    let (lon_0, lat_0) = geo.lonlat(0.0, 0.0);
-    let half = ((lon_c - lon_0).abs() * 1.2, (lat_c - lat_0).abs() * 1.2);
-    let alt_range = (
-        -1.0,
-        world.params.scene.relief_m + world::scene::MAX_OBJECT_HEIGHT_M + 1.0,
-    );
+    // The cameras exactly as the world writer stores them.
     let rpc = |cam: &world::camera::AffineCamera, id: &str| {
-        let json = cam.to_satnerf_json(id, w, h, (lon_c, lat_c), half, alt_range);
-        let text = serde_json::to_string_pretty(&json).unwrap();
+        let text = serde_json::to_string_pretty(&world.camera_json(cam, id)).unwrap();
         RpcModel::from_rpcm_json(&serde_json::from_str(&text).unwrap()).unwrap()
     };
     let (rpc_l, rpc_r) = (rpc(&world.camera_left, "A"), rpc(&world.camera_right, "B"));
-    assert_eq!(rpc_l.scene_altitude_range(), alt_range);
+    assert_eq!(rpc_l.scene_altitude_range(), world.altitude_range());
 
     let mask = Mask::from_fn(w, h, |x, y| !world.occluded.get(x, y));
     let points = triangulate_disparity(

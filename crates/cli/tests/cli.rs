@@ -106,8 +106,14 @@ fn demo_writes_a_report() {
     );
     // The six-date step: its section, its stack and both DSMs (how the fusion compares with the
     // best pair is tested at a size where it means something, in reconstruct_many.rs).
-    assert!(html.contains("7. Many dates, one DSM"), "no many-dates section");
-    assert!(stdout.contains("six dates (128² px), 6 pairs fused"), "{stdout}");
+    assert!(
+        html.contains("7. Many dates, one DSM"),
+        "no many-dates section"
+    );
+    assert!(
+        stdout.contains("six dates (128² px), 6 pairs fused"),
+        "{stdout}"
+    );
     for f in [
         "dates/raw/WORLD_1_D6.tif",
         "dates/rpc/WORLD_1_D1.json",

@@ -24,7 +24,7 @@ use world::{ViewCamera, WorldParams};
 use crate::eval::layout::TruthFiles;
 use crate::progress::{track, Progress};
 use crate::stage::write_json;
-use crate::world_io::{camera_json, image_ids, write_raw_view, write_world_truth};
+use crate::world_io::{image_ids, write_raw_view, write_world_truth};
 
 /// One acquisition of the stack.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -133,7 +133,7 @@ pub fn write_dated_stack(
             .with_context(|| format!("the {} colours of {id}", a.season))?;
         let path = root.join("raw").join(format!("{id}.tif"));
         write_raw_view(&image, &world.rectify_left, &path)?;
-        let mut camera = camera_json(&world, &world.camera_left, &id);
+        let mut camera = world.camera_json(&world.camera_left, &id);
         camera["acquisition_date"] = Value::from(a.date);
         camera["sun_elevation"] = Value::from(a.sun_elevation_deg);
         camera["sun_azimuth"] = Value::from(a.sun_azimuth_deg);

@@ -79,7 +79,7 @@ pub fn save_world(world: &World, root: &Path, name: &str) -> Result<PairPaths> {
         )?;
         write_json(
             &root.join("rpc").join(format!("{id}.json")),
-            &camera_json(world, camera, id),
+            &world.camera_json(camera, id),
         )?;
     }
     let (d_lo, d_hi) = world.disparity_range();
@@ -143,21 +143,6 @@ pub fn write_raw_view(image: &Image, rectify: &Homography, path: &Path) -> Resul
     };
     raster::formats::write_tiled_u8(path, &raw, &meta)
         .with_context(|| format!("writing {}", path.display()))
-}
-
-/// One raw camera of `world` (its left or right one) as a SatNeRF/rpcm JSON named `id`: a
-/// degree-1 RPC valid over the world's footprint and altitudes.
-pub fn camera_json(world: &World, camera: &world::AffineCamera, id: &str) -> serde_json::Value {
-    let (w, h) = world.disparity.size();
-    let geo = &world.geo;
-    let (lon_c, lat_c) = geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
-    let (lon_0, lat_0) = geo.lonlat(0.0, 0.0);
-    let half = ((lon_c - lon_0).abs() * 1.2, (lat_c - lat_0).abs() * 1.2);
-    let alt_range = (
-        -1.0,
-        world.params.scene.relief_m + world::scene::MAX_OBJECT_HEIGHT_M + 1.0,
-    );
-    camera.to_satnerf_json(id, w, h, (lon_c, lat_c), half, alt_range)
 }
 
 /// DFC2019 class of an OpenEarthMap id of the world: tree → 5 (foliage), water → 9, building → 6,

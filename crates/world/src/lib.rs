@@ -155,6 +155,24 @@ impl World {
     pub fn disparity_range(&self) -> (i32, i32) {
         self.params.disparity_range()
     }
+
+    /// Altitudes of the scene, metres: what its cameras declare as `min_alt`/`max_alt`.
+    pub fn altitude_range(&self) -> (f64, f64) {
+        (
+            -1.0,
+            self.params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0,
+        )
+    }
+
+    /// One raw camera of the world (its left or right one) as a SatNeRF/rpcm JSON named `id`: a
+    /// degree-1 RPC valid over the world's footprint (with a 20 % margin) and its altitudes.
+    pub fn camera_json(&self, camera: &AffineCamera, id: &str) -> serde_json::Value {
+        let (w, h) = self.disparity.size();
+        let (lon_c, lat_c) = self.geo.lonlat(w as f64 / 2.0, h as f64 / 2.0);
+        let (lon_0, lat_0) = self.geo.lonlat(0.0, 0.0);
+        let half = ((lon_c - lon_0).abs() * 1.2, (lat_c - lat_0).abs() * 1.2);
+        camera.to_satnerf_json(id, w, h, (lon_c, lat_c), half, self.altitude_range())
+    }
 }
 
 /// Generates the world described by `params`, coloured by `appearance`; `progress(rows_done, rows)`
