@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Result;
-use pipeline::dsm::{DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
 use pipeline::reconstruct::fabricated::fabricate_tiles;
 use pipeline::reconstruct::folder::TileFolder;
 use pipeline::reconstruct::merge::{merge_memory, merge_tiles, Finishing, MERGE_BLOCK_ROWS};
@@ -30,11 +29,7 @@ pub fn run(
     let t = Instant::now();
     let made = fabricate_tiles(&work, (cells, cells), TILE_CELLS)?;
     let fabricated = t.elapsed().as_secs_f64();
-    let finishing = Finishing {
-        gridding: camera::Gridding::Median,
-        fill_holes: Some(DEFAULT_FILL_CELLS),
-        median_filter: Some(DEFAULT_MEDIAN_CELLS),
-    };
+    let finishing = Finishing::default();
     let block_rows = block_rows.unwrap_or(MERGE_BLOCK_ROWS).max(1);
     let estimate = merge_memory(&made.grid, &finishing, block_rows);
     let t = Instant::now();

@@ -154,16 +154,9 @@ fn a_submission_gives_the_local_dsm_and_failed_tiles_are_named_and_resubmitted()
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let local = dir.path().join("local.tif");
-    let o = cluster.run(
-        &["reconstruct"]
-            .iter()
-            .map(|s| s.to_string())
-            .chain(scene_args(&root, &local))
-            .collect::<Vec<_>>()
-            .iter()
-            .map(String::as_str)
-            .collect::<Vec<_>>(),
-    );
+    let mut args = vec!["reconstruct".to_string()];
+    args.extend(scene_args(&root, &local));
+    let o = run_strings(&cluster, &args);
     assert!(o.status.success(), "{}", text(&o));
 
     let out = dir.path().join("out dir/slurm dsm.tif");

@@ -3,12 +3,13 @@
 //! load errors on a whole checkpoint, and the save/reload round trip.
 
 mod support;
+use support::Fixture;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
 use burn::module::{Module, ModuleVisitor, Param};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 use nn::config::MonsterConfig;
 use nn::monster::{Monster, MonsterOutput};
 use nn::weights::{load_weights, module_keys, save_checkpoint, WeightsError};
@@ -20,44 +21,6 @@ const ITERS: usize = 8;
 
 fn weights() -> PathBuf {
     support::fixture_dir(FIX).join("weights.safetensors")
-}
-
-struct Fixture {
-    tensors: HashMap<String, (Vec<usize>, Vec<f32>)>,
-}
-
-impl Fixture {
-    fn load() -> Self {
-        let path = support::fixture_dir(FIX).join("tensors.safetensors");
-        Self {
-            tensors: support::read_all(&path)
-                .into_iter()
-                .map(|(n, s, v)| (n, (s, v)))
-                .collect(),
-        }
-    }
-
-    fn raw(&self, name: &str) -> &(Vec<usize>, Vec<f32>) {
-        self.tensors
-            .get(name)
-            .unwrap_or_else(|| panic!("fixture has no tensor {name}"))
-    }
-
-    fn t<const N: usize>(&self, name: &str, device: &Device) -> Tensor<N> {
-        let (shape, values) = self.raw(name);
-        Tensor::from_data(TensorData::new(values.clone(), shape.clone()), device)
-    }
-
-    /// Max abs error against fixture tensor `name` (shapes must agree); printed.
-    fn check<const N: usize>(&self, got: &Tensor<N>, name: &str, tol: f32) -> f32 {
-        let (shape, want) = self.raw(name);
-        assert_eq!(&got.dims().to_vec(), shape, "{name}: shape");
-        let got: Vec<f32> = got.to_data().convert::<f32>().try_to_vec::<f32>().unwrap();
-        let (err, scale) = support::max_abs_diff(&got, want);
-        println!("{name:<24} max abs err {err:.3e}  (max |ref| {scale:.3e})");
-        assert!(err <= tol, "{name}: max abs error {err:e} > {tol:e}");
-        err
-    }
 }
 
 fn tiny_loaded(device: &Device) -> Monster {
@@ -77,11 +40,10 @@ fn tiny_loaded(device: &Device) -> Monster {
 }
 
 fn run(model: &Monster, fx: &Fixture, test_mode: bool) -> MonsterOutput {
-    let device = Device::flex();
     let t0 = std::time::Instant::now();
     let out = model.forward(
-        fx.t("input.left", &device),
-        fx.t("input.right", &device),
+        fx.t::<4>("input.left"),
+        fx.t::<4>("input.right"),
         ITERS,
         test_mode,
     );
@@ -90,11 +52,6 @@ fn run(model: &Monster, fx: &Fixture, test_mode: bool) -> MonsterOutput {
         t0.elapsed()
     );
     out
-}
-
-/// max |depth_mono| of the fixture (bounds the mono disparity at 1/4 resolution).
-fn mono_max(fx: &Fixture) -> f32 {
-    support::max_abs(&fx.raw("output.depth_mono").1)
 }
 
 /// The one sample's scale/shift against the fixture's.
@@ -106,40 +63,40 @@ fn check_scale_shift(got: &[(f32, f32)], want: &[f32], mono_max: f32) {
 #[test]
 fn end_to_end_parity_test_mode() {
     testdata::require!(FIX);
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIX);
     let model = tiny_loaded(&Device::flex());
     assert_eq!(model.config(), &MonsterConfig::tiny());
     let out = run(&model, &fx, true);
-    let err = fx.check(&out.disp, "output.disp", 1e-3);
+    let err = fx.assert_close(&out.disp, "output.disp", 1e-3);
     println!("END-TO-END output.disp max abs error: {err:.3e} px");
     assert!(out.disp_preds.is_empty());
     assert!(out.init_disp_up.is_none());
-    fx.check(&out.depth_mono, "output.depth_mono", 1e-4);
-    check_scale_shift(&out.scale_shift, &fx.raw("scale_shift").1, mono_max(&fx));
+    fx.assert_close(&out.depth_mono, "output.depth_mono", 1e-4);
+    check_scale_shift(&out.scale_shift, &fx.raw("scale_shift").1, fx.mono_max());
 }
 
 #[test]
 fn end_to_end_parity_train_mode() {
     testdata::require!(FIX);
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIX);
     let model = tiny_loaded(&Device::flex());
     let out = run(&model, &fx, false);
     assert_eq!(out.disp_preds.len(), ITERS + 7);
     assert_eq!(out.disp_preds.len(), fx.raw("output.disp_preds").0[0]);
     let preds = Tensor::stack::<5>(out.disp_preds.clone(), 0);
-    fx.check(&preds, "output.disp_preds", 1e-3);
+    fx.assert_close(&preds, "output.disp_preds", 1e-3);
     support::print_prediction_errors(&out.disp_preds, &fx.raw("output.disp_preds").1);
     let last = out.disp_preds.last().unwrap().clone();
     let same: f32 = (last - out.disp.clone()).abs().max().into_scalar();
     assert_eq!(same, 0.0, "the last prediction is the output");
-    fx.check(&out.disp, "output.disp", 1e-3);
+    fx.assert_close(&out.disp, "output.disp", 1e-3);
     let init_up = out
         .init_disp_up
         .as_ref()
         .expect("train mode gives init_disp_up");
-    fx.check(init_up, "output.init_disp_up", 1e-4);
-    fx.check(&out.depth_mono, "output.depth_mono", 1e-4);
-    check_scale_shift(&out.scale_shift, &fx.raw("scale_shift").1, mono_max(&fx));
+    fx.assert_close(init_up, "output.init_disp_up", 1e-4);
+    fx.assert_close(&out.depth_mono, "output.depth_mono", 1e-4);
+    check_scale_shift(&out.scale_shift, &fx.raw("scale_shift").1, fx.mono_max());
 }
 
 // ---------------------------------------------------------------- key sets and counts
@@ -376,7 +333,7 @@ fn wrong_config_is_an_error() {
 #[test]
 fn save_and_reload_gives_identical_output() {
     testdata::require!(FIX);
-    let fx = Fixture::load();
+    let fx = Fixture::load(FIX);
     let device = Device::flex();
     let model = tiny_loaded(&device);
     let path = tmp("roundtrip.safetensors");
@@ -406,7 +363,7 @@ fn save_and_reload_gives_identical_output() {
     let diff: f32 = (a.clone() - b).abs().max().into_scalar();
     println!("save/reload: max abs output difference {diff:e}");
     assert_eq!(diff, 0.0);
-    fx.check(&a, "output.disp", 1e-3);
+    fx.assert_close(&a, "output.disp", 1e-3);
 }
 
 // ---------------------------------------------------------------- training setup

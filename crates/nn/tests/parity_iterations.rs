@@ -18,23 +18,6 @@ use nn::monster::warp::disp_warp;
 
 const ITERS: usize = 8;
 
-impl Fixture {
-    /// Max abs error of `got` against fixture tensor `name` (shapes must agree).
-    fn err<const N: usize>(&self, got: &Tensor<N>, name: &str) -> (f32, f32) {
-        let (shape, want) = self.raw(name);
-        assert_eq!(&got.dims().to_vec(), shape, "{name}: shape");
-        let got: Vec<f32> = got.to_data().convert::<f32>().try_to_vec::<f32>().unwrap();
-        support::max_abs_diff(&got, want)
-    }
-
-    fn check<const N: usize>(&self, got: &Tensor<N>, name: &str, tol: f32) -> f32 {
-        let (e, scale) = self.err(got, name);
-        println!("{name:<45} max abs err {e:.3e}  (max |ref| {scale:.3e})");
-        assert!(e <= tol, "{name}: max abs error {e:e} > {tol:e}");
-        e
-    }
-}
-
 /// Each stage fed with fixture tensors (no error accumulation).
 #[test]
 fn stages_in_isolation() {
@@ -47,16 +30,16 @@ fn stages_in_isolation() {
     // Geo encoding lookup at the initial disparity.
     let init = fx.t::<4>("inter.init_disp_q.0");
     let geo0 = inp.geo.lookup(&init);
-    fx.check(&geo0, "inter.geo_feat.0", 1e-4);
+    fx.assert_close(&geo0, "inter.geo_feat.0", 1e-4);
 
     // Plain update block, iteration 0.
     let out = parts
         .update_block
         .forward(inp.net.clone(), &inp.inp, geo0, init.clone());
-    fx.check(&out.delta, "inter.update_block.delta.0", 1e-5);
-    fx.check(&out.mask_feat, "inter.update_block.mask_feat.0", 1e-5);
+    fx.assert_close(&out.delta, "inter.update_block.delta.0", 1e-5);
+    fx.assert_close(&out.mask_feat, "inter.update_block.mask_feat.0", 1e-5);
     for i in 0..3 {
-        fx.check(&out.net[i], &format!("inter.update_block.net{i}.0"), 1e-5);
+        fx.assert_close(&out.net[i], &format!("inter.update_block.net{i}.0"), 1e-5);
     }
     let disp1 = init + fx.t::<4>("inter.update_block.delta.0");
     let up0 = upsample_disp(
@@ -66,20 +49,20 @@ fn stages_in_isolation() {
         fx.t::<4>("inter.update_block.mask_feat.0"),
         inp.stem_2x.clone(),
     );
-    fx.check(&up0, "inter.upsample_disp.0", 1e-4);
-    fx.check(&inp.geo.lookup(&disp1), "inter.geo_feat.1", 1e-4);
+    fx.assert_close(&up0, "inter.upsample_disp.0", 1e-4);
+    fx.assert_close(&inp.geo.lookup(&disp1), "inter.geo_feat.1", 1e-4);
 
     // Scale/shift alignment at iteration 1 and the two feature warps.
     let (aligned, params) = align_mono(inp.disp_mono_4x.clone(), &disp1);
     let want = &fx.raw("scale_shift").1;
     println!("scale_shift got {:?} want {:?}", params[0], want);
     support::check_scale_shift(params[0], want, fx.mono_max());
-    fx.check(
+    fx.assert_close(
         &disp_warp(inp.features_right0.clone(), aligned),
         "inter.feat_warp.0",
         1e-4,
     );
-    fx.check(
+    fx.assert_close(
         &disp_warp(inp.features_right0.clone(), disp1),
         "inter.feat_warp.1",
         1e-4,
@@ -92,7 +75,7 @@ fn stages_in_isolation() {
         inp.image1.clone(),
         inp.image2.clone(),
     );
-    fx.check(&refined, "inter.REMP.0", 1e-4);
+    fx.assert_close(&refined, "inter.REMP.0", 1e-4);
 }
 
 /// The whole loop from the fixture inputs, train mode (every intermediate and prediction) and
@@ -129,14 +112,14 @@ fn iterations_end_to_end() {
     support::check_scale_shift(out.scale_shift[0], want, fx.mono_max());
     assert_eq!(out.disp_preds.len(), fx.raw("output.disp_preds").0[0]);
     let preds = Tensor::stack::<5>(out.disp_preds.clone(), 0);
-    fx.check(&preds, "output.disp_preds", 1e-3);
-    fx.check(&out.disp, "output.disp", 1e-3);
+    fx.assert_close(&preds, "output.disp_preds", 1e-3);
+    fx.assert_close(&out.disp, "output.disp", 1e-3);
 
     let t0 = std::time::Instant::now();
     let test = iterate(&blocks, parts.inputs(&fx), ITERS, true);
     println!("test-mode loop: {:.2?}", t0.elapsed());
     assert!(test.disp_preds.is_empty());
-    fx.check(&test.disp, "output.disp", 1e-3);
+    fx.assert_close(&test.disp, "output.disp", 1e-3);
 }
 
 /// The loop is differentiable on an autodiff device (training): a backward from the final
@@ -164,7 +147,7 @@ fn iterations_backward_smoke() {
             acc + p.clone().abs().mean().reshape([1])
         });
     // With frozen BN the training-device forward equals the inference one.
-    fx.check(&out.disp, "output.disp", 1e-3);
+    fx.assert_close(&out.disp, "output.disp", 1e-3);
     let grads = loss.backward();
     let checks: Vec<(&str, Tensor<4>)> = vec![
         (

@@ -131,6 +131,22 @@ impl Fixture {
         Tensor::from_data(TensorData::new(values.clone(), shape.clone()), &self.device)
     }
 
+    /// Max abs error of `got` against fixture tensor `name` (shapes must agree), and max |ref|.
+    pub fn err<const N: usize>(&self, got: &Tensor<N>, name: &str) -> (f32, f32) {
+        let (shape, want) = self.raw(name);
+        assert_eq!(&got.dims().to_vec(), shape, "{name}: shape");
+        let got: Vec<f32> = got.to_data().convert::<f32>().try_to_vec::<f32>().unwrap();
+        max_abs_diff(&got, want)
+    }
+
+    /// Asserts the max abs error against `name` is at most `tol` (printed); returns it.
+    pub fn assert_close<const N: usize>(&self, got: &Tensor<N>, name: &str, tol: f32) -> f32 {
+        let (e, scale) = self.err(got, name);
+        println!("{name:<45} max abs err {e:.3e}  (max |ref| {scale:.3e})");
+        assert!(e <= tol, "{name}: max abs error {e:e} > {tol:e}");
+        e
+    }
+
     /// `2·img/255 − 1` of `input.left` / `input.right`, as the network normalises its inputs.
     pub fn image(&self, side: &str) -> Tensor<4> {
         self.t::<4>(&format!("input.{side}"))

@@ -18,7 +18,9 @@ use super::folder::TileFolder;
 use super::mosaic::Mosaic;
 use super::tile::{TileRecord, TileStatus};
 use super::{gib, ReconstructOptions};
-use crate::dsm::{filled_mask, filled_path, finish_dsm, DsmSummary};
+use crate::dsm::{
+    filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS,
+};
 
 /// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
 /// block as it comes); with its halo, about 180 MiB for a 16,384-cell-wide grid with the default
@@ -31,6 +33,18 @@ pub struct Finishing {
     pub gridding: Gridding,
     pub fill_holes: Option<usize>,
     pub median_filter: Option<usize>,
+}
+
+impl Default for Finishing {
+    /// What a single pair's DSM gets by default: median gridding, filling up to
+    /// [`DEFAULT_FILL_CELLS`], a [`DEFAULT_MEDIAN_CELLS`] median.
+    fn default() -> Self {
+        Finishing {
+            gridding: Gridding::Median,
+            fill_holes: Some(DEFAULT_FILL_CELLS),
+            median_filter: Some(DEFAULT_MEDIAN_CELLS),
+        }
+    }
 }
 
 impl Finishing {

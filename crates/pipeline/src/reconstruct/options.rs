@@ -7,7 +7,8 @@ use camera::rectify::Roi;
 use camera::Gridding;
 use dataset::shard::Shard;
 
-use crate::dsm::{GridChoice, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+use super::merge::Finishing;
+use crate::dsm::GridChoice;
 use crate::matcher::Matcher;
 
 /// Tile side, left raw pixels: an affine rectification holds over about a kilometre.
@@ -78,6 +79,7 @@ impl ReconstructOptions {
         grid: GridChoice,
         output: PathBuf,
     ) -> Self {
+        let finishing = Finishing::default();
         ReconstructOptions {
             left,
             right,
@@ -90,9 +92,9 @@ impl ReconstructOptions {
             output,
             work_dir: None,
             grid,
-            gridding: Gridding::Median,
-            fill_holes: Some(DEFAULT_FILL_CELLS),
-            median_filter: Some(DEFAULT_MEDIAN_CELLS),
+            gridding: finishing.gridding,
+            fill_holes: finishing.fill_holes,
+            median_filter: finishing.median_filter,
             border: 0,
             truth: None,
             tile: DEFAULT_TILE,
