@@ -91,9 +91,15 @@ impl WorldParams {
     /// cameras and the scene's altitude range (the way a satellite pipeline should bound it); it
     /// does not depend on the seed, so it is known before rendering.
     pub fn disparity_range(&self) -> (i32, i32) {
-        let scene_max = self.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
-        let (a, b) = (self.disparity_at(-1.0), self.disparity_at(scene_max));
+        let (lo, hi) = self.altitude_range();
+        let (a, b) = (self.disparity_at(lo), self.disparity_at(hi));
         (a.min(b).floor() as i32, a.max(b).ceil() as i32)
+    }
+
+    /// Altitudes the scene can reach, metres, with a metre of margin each side: what bounds the
+    /// disparity search, the rendered margin and the cameras' `min_alt`/`max_alt`.
+    pub fn altitude_range(&self) -> (f64, f64) {
+        (-1.0, self.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0)
     }
 
     fn check(&self) -> Result<(), String> {
@@ -156,12 +162,9 @@ impl World {
         self.params.disparity_range()
     }
 
-    /// Altitudes of the scene, metres: what its cameras declare as `min_alt`/`max_alt`.
+    /// Altitudes of the scene, metres ([`WorldParams::altitude_range`]).
     pub fn altitude_range(&self) -> (f64, f64) {
-        (
-            -1.0,
-            self.params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0,
-        )
+        self.params.altitude_range()
     }
 
     /// One raw camera of the world (its left or right one) as a SatNeRF/rpcm JSON named `id`: a
@@ -260,7 +263,7 @@ struct Extent {
 impl Extent {
     fn of(params: &WorldParams) -> Self {
         let max_slope = params.left.slope.abs().max(params.right.slope.abs());
-        let max_z = params.scene.relief_m + scene::MAX_OBJECT_HEIGHT_M + 1.0;
+        let max_z = params.altitude_range().1;
         let margin =
             (max_slope * max_z + params.left.offset.abs().max(params.right.offset.abs()) + 4.0)
                 .ceil();

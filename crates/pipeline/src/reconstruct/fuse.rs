@@ -150,8 +150,9 @@ impl Agreement {
 }
 
 /// The power of a pair's agreement that gives its weight. On the ten dev images (12 pairs,
-/// agreements 0.56–0.91, 0.5 m clusters) the powers 1, 2, 4, 8 gave 0.840, 0.837, 0.832, 0.824 m against 0.850 m
-/// with equal weights, within 1 m 83.0–83.2 % against 82.8 % (BENCHMARKS.md).
+/// agreements 0.56–0.91, 0.5 m clusters) the powers 1, 2, 4, 8 gave 0.840, 0.837, 0.832,
+/// 0.824 m against 0.850 m with equal weights, within 1 m 83.0–83.2 % against 82.8 %
+/// (BENCHMARKS.md).
 pub const AGREEMENT_POWER: i32 = 8;
 
 /// A pair's weight from its agreement with the equal-weight fusion: `share^8`, never below

@@ -394,14 +394,17 @@ fn fuse_pairs(
     let equal = vec![1.0; layers.len()];
     let mut fused = fuse_files(&layers, &equal, grid, rows, &params, progress)?;
     let agreement = std::mem::take(&mut fused.agreement);
-    let weights: Vec<f32> = agreement.iter().map(pair_weight).collect();
-    if opts.weight_pairs {
+    let weights: Vec<f32> = if opts.weight_pairs {
+        let weights: Vec<f32> = agreement.iter().map(pair_weight).collect();
         fused = fuse_files(&layers, &weights, grid, rows, &params, progress)?;
-    }
+        weights
+    } else {
+        equal
+    };
     for (k, &i) in fusable.iter().enumerate() {
         let p = &mut summary.pairs[i];
         p.agreement = Some(agreement[k]);
-        p.weight = Some(if opts.weight_pairs { weights[k] } else { 1.0 });
+        p.weight = Some(weights[k]);
     }
     summary.fused = Some(write_fused(opts, fused, grid, layers.len(), t)?);
     if let Some(path) = &opts.truth {
