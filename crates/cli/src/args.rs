@@ -160,7 +160,10 @@ pub struct SgmArgs {
     /// SGM penalty of ±1 px disparity changes (census bits).
     #[arg(long, default_value_t = SgmParams::default().p1)]
     p1: u16,
-    /// SGM penalty of larger disparity jumps (census bits).
+    /// SGM penalty of larger disparity jumps (census bits). `reconstruct` and `reconstruct-many`
+    /// scale it by the square of the disparity per metre of altitude on tiles under 1 px/m
+    /// (narrow baselines, where roof edges are jumps of a few pixels; each tile record says the
+    /// P2 it used).
     #[arg(long, default_value_t = SgmParams::default().p2)]
     p2: u16,
     /// Use 4 aggregation paths instead of 8 (faster, slightly less accurate).

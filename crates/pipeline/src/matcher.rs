@@ -70,7 +70,43 @@ pub struct Matched {
     pub range: Option<DisparityRange>,
 }
 
+/// At and above this disparity per metre of altitude the classical matcher uses its `P2` as
+/// given; below it, [`Matcher::for_baseline`] scales `P2` down.
+pub const FULL_P2_PIXELS_PER_METRE: f64 = 1.0;
+
+/// `P2` for a baseline of `pixels_per_metre` (disparity per metre of altitude, after any
+/// stretch): `p.p2 · min(1, ppm / FULL_P2_PIXELS_PER_METRE)²`, never under `P1 + 1` (an
+/// unknown slope keeps `p.p2`).
+///
+/// Why: a jump of `k` pixels costs `P2` once, or `k · P1` as a ramp of one-pixel steps, and the
+/// matcher takes the cheaper. On a narrow baseline a roof edge is a jump of a few pixels only,
+/// so a `P2` chosen on wide baselines turns edges into ramps and small buildings into mounds.
+/// On the 10 dev pairs under 1 px/m, the square gave 1.463 m / 66.5 % within 1 m against
+/// 1.543 m / 63.3 % with a fixed `P2` (linear: 1.501 m / 65.3 %); at 1.1–2.5 px/m a lower `P2`
+/// is worse (BENCHMARKS.md).
+pub fn baseline_p2(p: &SgmParams, pixels_per_metre: f64) -> u16 {
+    if !pixels_per_metre.is_finite() {
+        return p.p2;
+    }
+    let scale = (pixels_per_metre / FULL_P2_PIXELS_PER_METRE).clamp(0.0, 1.0);
+    let p2 = (f64::from(p.p2) * scale * scale).round() as u16;
+    p2.max(p.p1.saturating_add(1)).min(p.p2)
+}
+
 impl Matcher {
+    /// The matcher for a tile whose baseline gives `pixels_per_metre` ([`baseline_p2`]), or
+    /// `None` when it is this one (the network, or a baseline of 1 px/m or more).
+    pub fn for_baseline(&self, pixels_per_metre: f64) -> Option<Matcher> {
+        match self {
+            Matcher::Classical(p) => {
+                let p2 = baseline_p2(p, pixels_per_metre);
+                (p2 != p.p2).then(|| Matcher::Classical(SgmParams { p2, ..p.clone() }))
+            }
+            #[cfg(feature = "network")]
+            Matcher::Network(_) => None,
+        }
+    }
+
     /// Short name, e.g. for Table 1's rows: `MGM (census)`, `SGM (census)`, `MonSter++ (vitl)`.
     pub fn name(&self) -> String {
         match self {
@@ -350,6 +386,31 @@ mod network {
                 predictor.predict_with_progress(left, right, &|done, total| cb(done, total))
             })?;
             Ok(d)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Wide baselines keep the given `P2`; narrow ones scale it by the square of their slope,
+    /// never under `P1 + 1`; the network is left alone.
+    #[test]
+    fn p2_shrinks_with_the_square_of_a_narrow_baseline() {
+        let p = SgmParams::default();
+        assert_eq!((p.p1, p.p2), (16, 300));
+        assert_eq!(baseline_p2(&p, 2.5), 300);
+        assert_eq!(baseline_p2(&p, 1.0), 300);
+        assert_eq!(baseline_p2(&p, 0.5), 75);
+        assert_eq!(baseline_p2(&p, 0.4), 48);
+        assert_eq!(baseline_p2(&p, 0.05), 17);
+        assert_eq!(baseline_p2(&p, f64::NAN), 300);
+        let classical = Matcher::Classical(p.clone());
+        assert!(classical.for_baseline(1.3).is_none());
+        match classical.for_baseline(0.5) {
+            Some(Matcher::Classical(q)) => assert_eq!(q, SgmParams { p2: 75, ..p }),
+            _ => panic!("a narrow baseline changes P2"),
         }
     }
 }

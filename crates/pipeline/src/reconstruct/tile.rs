@@ -78,6 +78,9 @@ pub struct TileRecord {
     /// pixels.
     #[serde(default)]
     pub stretch: Option<f64>,
+    /// The classical matcher's `P2` on this tile, after [`crate::matcher::baseline_p2`].
+    #[serde(default)]
+    pub p2: Option<u16>,
     /// Share of the rectified left pixels with a disparity.
     pub matched: Option<f64>,
     /// Median row offset of the right view's matches of textured left patches, pixels
@@ -104,6 +107,7 @@ impl TileRecord {
             rectified_size: None,
             pixels_per_metre: None,
             stretch: None,
+            p2: None,
             matched: None,
             vertical_parallax: None,
             points: 0,
@@ -240,8 +244,15 @@ fn match_and_grid(
     record.vertical_parallax =
         matching::vertical_parallax(&left, &right, rect.disparity_range).map(|p| p.median_rows);
 
-    let disparity = scene
-        .matcher
+    let for_baseline = scene.matcher.for_baseline(rect.pixels_per_metre);
+    record.p2 = match for_baseline.as_ref().unwrap_or(scene.matcher) {
+        Matcher::Classical(p) => Some(p.p2),
+        #[allow(unreachable_patterns)] // the network, in builds that have it
+        _ => None,
+    };
+    let disparity = for_baseline
+        .as_ref()
+        .unwrap_or(scene.matcher)
         .disparity(
             &left,
             &right,
