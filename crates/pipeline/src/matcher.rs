@@ -107,6 +107,15 @@ impl Matcher {
         }
     }
 
+    /// The classical matcher's `P2`; `None` for the network.
+    pub fn p2(&self) -> Option<u16> {
+        match self {
+            Matcher::Classical(p) => Some(p.p2),
+            #[cfg(feature = "network")]
+            Matcher::Network(_) => None,
+        }
+    }
+
     /// Short name, e.g. for Table 1's rows: `MGM (census)`, `SGM (census)`, `MonSter++ (vitl)`.
     pub fn name(&self) -> String {
         match self {
@@ -407,6 +416,7 @@ mod tests {
         assert_eq!(baseline_p2(&p, 0.05), 17);
         assert_eq!(baseline_p2(&p, f64::NAN), 300);
         let classical = Matcher::Classical(p.clone());
+        assert_eq!(classical.p2(), Some(300));
         assert!(classical.for_baseline(1.3).is_none());
         match classical.for_baseline(0.5) {
             Some(Matcher::Classical(q)) => assert_eq!(q, SgmParams { p2: 75, ..p }),

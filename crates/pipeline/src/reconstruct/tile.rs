@@ -245,14 +245,9 @@ fn match_and_grid(
         matching::vertical_parallax(&left, &right, rect.disparity_range).map(|p| p.median_rows);
 
     let for_baseline = scene.matcher.for_baseline(rect.pixels_per_metre);
-    record.p2 = match for_baseline.as_ref().unwrap_or(scene.matcher) {
-        Matcher::Classical(p) => Some(p.p2),
-        #[allow(unreachable_patterns)] // the network, in builds that have it
-        _ => None,
-    };
-    let disparity = for_baseline
-        .as_ref()
-        .unwrap_or(scene.matcher)
+    let matcher = for_baseline.as_ref().unwrap_or(scene.matcher);
+    record.p2 = matcher.p2();
+    let disparity = matcher
         .disparity(
             &left,
             &right,
