@@ -93,6 +93,7 @@ def reconstruct(
     shard: Optional[str] = None,
     merge: Optional[bool] = None,
     keep_intermediates: Optional[bool] = None,
+    single_view: Optional[bool] = None,
     threads: Optional[int] = None,
     **matcher: Any,
 ) -> dict[str, Any]: ...

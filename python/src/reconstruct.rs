@@ -66,6 +66,7 @@ fn reconstruct_options(
     o.truth = k.path("truth")?;
     k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
+    o.both_views = !k.take("single_view")?.unwrap_or(false);
     shard_keywords(k, &mut o)?;
     Ok(o)
 }

@@ -20,7 +20,8 @@ use crate::args::{
     after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
     altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W; \
     on very narrow baselines, under 0.4 px of disparity per metre of altitude, the classical \
-    matcher works on rows stretched 2x for half-pixel steps), triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
+    matcher works on rows stretched 2x for half-pixel steps; under 0.65 px/m it matches from both \
+    views and keeps the cells they agree on, see --single-view), triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
     --work (default OUTPUT_work/: L/, R/, homography/, rectify/, disparity/), in the layout \
     `seasonstereo eval` reads.\n\n\
     Example (DFC2019 Jacksonville, bundle-adjusted cameras, scored against the LiDAR truth):\n  \
@@ -72,6 +73,13 @@ pub struct ReconstructArgs {
     /// per pixel.
     #[arg(long)]
     keep_intermediates: bool,
+    /// Match very narrow baselines from the left view only. By default the classical matcher
+    /// measures a tile under 0.65 px of disparity per metre of altitude (a pixel is over 1.5 m
+    /// of height) from both views, and a cell keeps their mean height only where both measured
+    /// it within 2 m; the others are left to the hole filling (flagged in the _filled sidecar).
+    /// Costs a second match on those tiles.
+    #[arg(long)]
+    single_view: bool,
     /// Altitudes of the scene MIN:MAX, metres. Default: min_alt/max_alt of the JSON cameras, else
     /// the RPCs' altitude offset ± scale.
     #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
@@ -179,6 +187,7 @@ impl ReconstructArgs {
             tiles_only: self.tiles_only,
             complete_only: self.merge && !crate::exit::safety().allow_partial,
             keep_intermediates: self.keep_intermediates,
+            both_views: !self.single_view,
         })
     }
 }

@@ -15,6 +15,7 @@
 //! Many acquisitions of one area become one DSM in [`many`]: the pairs chosen by [`select`] run
 //! through [`reconstruct`] on one grid and [`fuse`] merges their measured cells.
 
+pub mod both_views;
 pub mod fabricated;
 pub mod folder;
 pub mod fuse;
@@ -184,6 +185,10 @@ struct SceneSettings {
     gridding: String,
     matcher: String,
     border: usize,
+    /// Absent from folders made before both views existed, whose tiles were matched from the
+    /// left view only.
+    #[serde(default)]
+    both_views: bool,
 }
 
 /// What a run of these options will do, known before any tile runs: the tiles, the DSM grid and
@@ -416,6 +421,7 @@ impl OpenPair {
             keep: opts.keep_intermediates.then_some(work),
             stem,
             single_tile,
+            both_views: opts.both_views,
         }
     }
 }
@@ -465,6 +471,7 @@ fn scene_settings(
         gridding: format!("{:?}", opts.gridding).to_lowercase(),
         matcher: opts.matcher.describe(),
         border: opts.border,
+        both_views: opts.both_views,
     }
 }
 

@@ -482,6 +482,9 @@ fn pair_options(
     o.collar = opts.collar;
     o.max_memory = opts.max_memory;
     o.shard = Shard::ALL;
+    // The fusion's agreement between pairs does what both views do within a pair, and needs
+    // each pair's cells: on the six-date world both views cost the fused DSM (BENCHMARKS.md).
+    o.both_views = false;
     o
 }
 

@@ -68,6 +68,10 @@ pub struct ReconstructOptions {
     /// Keep every tile's rectified pair and disparity in the work folder (`L/`, `R/`,
     /// `homography/`, `disparity/`, the layout `eval` reads).
     pub keep_intermediates: bool,
+    /// Measure the tiles of very narrow baselines from both views and keep the cells they agree
+    /// on ([`super::both_views`]); `false` matches from the left view only (what
+    /// `reconstruct-many` does: there the other pairs play that part).
+    pub both_views: bool,
 }
 
 impl ReconstructOptions {
@@ -105,6 +109,7 @@ impl ReconstructOptions {
             tiles_only: false,
             complete_only: false,
             keep_intermediates: false,
+            both_views: true,
         }
     }
 

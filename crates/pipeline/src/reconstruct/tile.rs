@@ -13,6 +13,7 @@ use raster::formats::{write_homographies, write_npy};
 use raster::{Homography, Image, Mask};
 use serde::{Deserialize, Serialize};
 
+use super::both_views::{both_views_cells, wants_both_views};
 use super::plan::Tile;
 use super::raw::RawImage;
 use crate::dsm::valid_pixels;
@@ -45,6 +46,8 @@ pub struct Scene<'a> {
     /// `<stem>_<tile id>`.
     pub stem: &'a str,
     pub single_tile: bool,
+    /// Whether very narrow baselines are measured from both views ([`super::both_views`]).
+    pub both_views: bool,
 }
 
 /// How a tile ended.
@@ -81,6 +84,10 @@ pub struct TileRecord {
     /// The classical matcher's `P2` on this tile, after [`crate::matcher::baseline_p2`].
     #[serde(default)]
     pub p2: Option<u16>,
+    /// Measured from both views, only the cells they agree on kept (very narrow baselines,
+    /// [`super::both_views`]).
+    #[serde(default)]
+    pub both_views: Option<bool>,
     /// Share of the rectified left pixels with a disparity.
     pub matched: Option<f64>,
     /// Median row offset of the right view's matches of textured left patches, pixels
@@ -108,6 +115,7 @@ impl TileRecord {
             pixels_per_metre: None,
             stretch: None,
             p2: None,
+            both_views: None,
             matched: None,
             vertical_parallax: None,
             points: 0,
@@ -265,7 +273,6 @@ fn match_and_grid(
         };
         keep_files(scene, dir, &name, tile, &left, &right, &disparity, rect)?;
     }
-    drop((left, right));
 
     let h_left_inv = rect
         .h_left
@@ -285,7 +292,7 @@ fn match_and_grid(
     if mask.count() == 0 {
         return Ok(None);
     }
-    let points = triangulate_disparity(
+    let left_points = triangulate_disparity(
         &disparity,
         &rect.h_left,
         &rect.h_right,
@@ -294,8 +301,13 @@ fn match_and_grid(
         &mask,
     )
     .context("triangulating")?;
-    record.points = points.valid_count();
-    Ok(rasterize_window(&points, scene.grid, scene.gridding))
+    record.points = left_points.valid_count();
+    let raw_pixels_per_metre = rect.pixels_per_metre / rect.stretch;
+    if !(scene.both_views && wants_both_views(scene.matcher, raw_pixels_per_metre)) {
+        return Ok(rasterize_window(&left_points, scene.grid, scene.gridding));
+    }
+    record.both_views = Some(true);
+    both_views_cells(scene, tile, rect, matcher, (&left, &right), &left_points)
 }
 
 /// The raw window covering `bounds` (raw pixels, with a 2-pixel margin for the interpolation,

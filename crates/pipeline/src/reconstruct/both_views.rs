@@ -1,0 +1,207 @@
+//! Very narrow baselines measured from both views: the tile is matched a second time with the
+//! right image as the reference, and a cell keeps a height only where both views measured it
+//! and agree ([`agreeing_cells`]); the others are left to the hole filling.
+//!
+//! Why: under [`BOTH_VIEWS_PIXELS_PER_METRE`] a pixel of disparity is more than 1.5 m of
+//! height. The two views' matches have their own census windows, aggregation grid and
+//! sub-pixel errors, so their mean halves the noise, and a cell only one view measured is more
+//! often a mismatch than the ground-first fill is wrong (BENCHMARKS.md).
+
+use anyhow::{Context, Result};
+use camera::{rasterize_window, triangulate_disparity, GridWindow, Points};
+use raster::{Image, Mask};
+
+use super::plan::Tile;
+use super::tile::Scene;
+use crate::dsm::valid_pixels;
+use crate::matcher::{Matcher, RangeSource};
+use crate::Silent;
+use camera::rectify::Rectification;
+
+/// Below this disparity per metre of altitude (raw pixels) the classical matcher measures a tile
+/// from both views. Measured on the dev pairs: the four under 0.65 px/m (0.20–0.62) gain
+/// 0.06 m and 3 points within 1 m; the pairs from 0.72 to 0.99 px/m are mixed (three of six lose
+/// 0.04–0.2 m), where more of the cells one view alone measured are real (wider occlusions).
+pub const BOTH_VIEWS_PIXELS_PER_METRE: f64 = 0.65;
+
+/// Two views' heights of a cell further apart than this are a mismatch in one of them (1 m and
+/// 2 m are alike on the dev pairs; 2 m keeps more of the procedural world's sharp edges).
+pub const AGREEMENT_METRES: f32 = 2.0;
+
+/// Whether a tile of this baseline (raw pixels per metre) is measured from both views.
+pub fn wants_both_views(matcher: &Matcher, pixels_per_metre: f64) -> bool {
+    matches!(matcher, Matcher::Classical(_)) && pixels_per_metre < BOTH_VIEWS_PIXELS_PER_METRE
+}
+
+/// `image` mirrored left–right.
+fn mirrored(image: &Image) -> Image {
+    let (w, h) = image.size();
+    let c = image.channels();
+    let mut data = Vec::with_capacity(image.data().len());
+    for y in 0..h {
+        let row = image.row(y);
+        for x in (0..w).rev() {
+            data.extend_from_slice(&row[x * c..(x + 1) * c]);
+        }
+    }
+    Image::new(w, h, c, data).expect("same size")
+}
+
+/// The right view's points: the rectified pair matched with the right image as the reference.
+///
+/// Mirrored, the right image becomes a left one with the same disparity range: a right pixel
+/// `x_r` matches the left `x_r + d`, i.e. `(w − 1 − x_r) − d` in the mirrored left. Its
+/// disparity, negated, is a disparity of the right view in the convention `x_other = x − d`, so
+/// the triangulation runs with the roles of the cameras swapped. Only the right pixels whose
+/// left match lands in the tile's core are kept, as for the left view.
+pub fn right_view_points(
+    scene: &Scene,
+    tile: &Tile,
+    rect: &Rectification,
+    matcher: &Matcher,
+    (left, right): (&Image, &Image),
+) -> Result<Option<Points>> {
+    let matched = matcher
+        .disparity(
+            &mirrored(right),
+            &mirrored(left),
+            RangeSource::Given(rect.disparity_range),
+            &Silent,
+        )?
+        .disparity;
+    let mut disparity = mirrored(&matched);
+    for d in disparity.data_mut() {
+        *d = -*d;
+    }
+    let h_left_inv = rect
+        .h_left
+        .inverse()
+        .context("the left rectifying homography is singular")?;
+    let core = tile.core;
+    let (cx0, cy0) = (core.x as f64, core.y as f64);
+    let (cx1, cy1) = (cx0 + core.width as f64, cy0 + core.height as f64);
+    let valid = valid_pixels(&disparity, scene.border);
+    let (w, h) = disparity.size();
+    let mask = Mask::from_fn(w, h, |x, y| {
+        if !valid.get(x, y) {
+            return false;
+        }
+        let xl = x as f64 - f64::from(disparity.get(x, y, 0));
+        let (u, v) = h_left_inv.apply(xl + 0.5, y as f64 + 0.5);
+        (cx0..cx1).contains(&u) && (cy0..cy1).contains(&v)
+    });
+    if mask.count() == 0 {
+        return Ok(None);
+    }
+    let points = triangulate_disparity(
+        &disparity,
+        &rect.h_right,
+        &rect.h_left,
+        scene.rpc_right,
+        scene.rpc_left,
+        &mask,
+    )
+    .context("triangulating the right view")?;
+    Ok(Some(points))
+}
+
+/// The cells both windows measured with heights within [`AGREEMENT_METRES`], at their mean
+/// height (the points of both counted); `None` when there are none.
+pub fn agreeing_cells(a: &GridWindow, b: &GridWindow) -> Option<GridWindow> {
+    let col = a.col.max(b.col);
+    let row = a.row.max(b.row);
+    let col_end = (a.col + a.width).min(b.col + b.width);
+    let row_end = (a.row + a.height).min(b.row + b.height);
+    if col >= col_end || row >= row_end {
+        return None;
+    }
+    let (width, height) = (col_end - col, row_end - row);
+    let at = |g: &GridWindow, c: usize, r: usize| (r - g.row) * g.width + (c - g.col);
+    let mut heights = vec![f32::NAN; width * height];
+    let mut counts = vec![0u16; width * height];
+    let mut any = false;
+    for r in row..row_end {
+        for c in col..col_end {
+            let (i, j) = (at(a, c, r), at(b, c, r));
+            let (za, zb) = (a.heights[i], b.heights[j]);
+            if (za - zb).abs() <= AGREEMENT_METRES {
+                let k = (r - row) * width + (c - col);
+                heights[k] = 0.5 * (za + zb);
+                counts[k] = a.counts[i].saturating_add(b.counts[j]);
+                any = true;
+            }
+        }
+    }
+    any.then_some(GridWindow {
+        col,
+        row,
+        width,
+        height,
+        heights,
+        counts,
+    })
+}
+
+/// Both views' cells of a tile from the left view's points: the right view matched and
+/// triangulated, both gridded, and only their agreeing cells kept.
+pub fn both_views_cells(
+    scene: &Scene,
+    tile: &Tile,
+    rect: &Rectification,
+    matcher: &Matcher,
+    images: (&Image, &Image),
+    left_points: &Points,
+) -> Result<Option<GridWindow>> {
+    let Some(left) = rasterize_window(left_points, scene.grid, scene.gridding) else {
+        return Ok(None);
+    };
+    let Some(points) = right_view_points(scene, tile, rect, matcher, images)? else {
+        return Ok(None);
+    };
+    let Some(right) = rasterize_window(&points, scene.grid, scene.gridding) else {
+        return Ok(None);
+    };
+    Ok(agreeing_cells(&left, &right))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn window(col: usize, row: usize, width: usize, heights: Vec<f32>) -> GridWindow {
+        let height = heights.len() / width;
+        GridWindow {
+            col,
+            row,
+            width,
+            height,
+            counts: vec![1; heights.len()],
+            heights,
+        }
+    }
+
+    #[test]
+    fn only_cells_both_views_measured_alike_are_kept_at_their_mean() {
+        let nan = f32::NAN;
+        // a covers columns 0..3, b columns 1..4 of one row.
+        let a = window(0, 0, 3, vec![5.0, 10.0, 20.0]);
+        let b = window(1, 0, 3, vec![10.5, 23.0, 7.0]);
+        let both = agreeing_cells(&a, &b).expect("one cell agrees");
+        assert_eq!((both.col, both.row, both.width, both.height), (1, 0, 2, 1));
+        assert_eq!(both.heights[0], 10.25);
+        assert!(both.heights[1].is_nan(), "3 m apart: a mismatch");
+        assert_eq!(both.counts, vec![2, 0]);
+        let holes = window(1, 0, 2, vec![nan, 20.0]);
+        let far = window(1, 0, 2, vec![10.0, 30.0]);
+        assert!(agreeing_cells(&holes, &far).is_none());
+        assert!(agreeing_cells(&window(0, 0, 1, vec![1.0]), &window(1, 0, 1, vec![1.0])).is_none());
+    }
+
+    #[test]
+    fn mirroring_twice_is_the_identity_and_keeps_pixels_whole() {
+        let image = Image::new(3, 1, 2, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        let m = mirrored(&image);
+        assert_eq!(m.data(), &[5.0, 6.0, 3.0, 4.0, 1.0, 2.0]);
+        assert_eq!(mirrored(&m).data(), image.data());
+    }
+}
