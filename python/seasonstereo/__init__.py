@@ -184,7 +184,7 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
     ``<out>_count.tif``, ``<out>_spread.tif`` and ``<out>_report.json`` beside it). Options, with
     the command's defaults: ``pairs``, ``dry_run`` (choose the pairs, write nothing),
     ``cluster_tolerance``, ``min_support``, ``register``, ``pair_weights``, ``fill_holes``,
-    ``median_filter``, ``pair_median_filter``, ``work``, ``like``, ``resolution``, ``epsg``,
+    ``median_filter``, ``pair_median_filter``, ``single_view``, ``work``, ``like``, ``resolution``, ``epsg``,
     ``truth``,
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
     call's worker threads; default every core) and the matcher's options of :func:`predict`.

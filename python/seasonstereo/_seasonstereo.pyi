@@ -114,6 +114,7 @@ def reconstruct_many(
     fill_holes: Optional[int] = None,
     median_filter: Optional[int] = None,
     pair_median_filter: Optional[int] = None,
+    single_view: Optional[bool] = None,
     work: Optional[_Path] = None,
     like: Optional[_Path] = None,
     resolution: Optional[float] = None,

@@ -70,6 +70,7 @@ fn many_options(
     if let Some(cells) = k.take("pair_median_filter")? {
         o.pair_median_filter = flags::median_cells(cells);
     }
+    o.both_views = !k.take("single_view")?.unwrap_or(false);
     o.truth = k.path("truth")?;
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;

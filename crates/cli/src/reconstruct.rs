@@ -20,7 +20,7 @@ use crate::args::{
     after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
     altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W; \
     on very narrow baselines, under 0.4 px of disparity per metre of altitude, the classical \
-    matcher works on rows stretched 2x for half-pixel steps; under 0.65 px/m it matches from both \
+    matcher works on rows stretched 2x for half-pixel steps; under 0.63 px/m it matches from both \
     views and keeps the cells they agree on, see --single-view), triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
     --work (default OUTPUT_work/: L/, R/, homography/, rectify/, disparity/), in the layout \
     `seasonstereo eval` reads.\n\n\
@@ -74,10 +74,11 @@ pub struct ReconstructArgs {
     #[arg(long)]
     keep_intermediates: bool,
     /// Match very narrow baselines from the left view only. By default the classical matcher
-    /// measures a tile under 0.65 px of disparity per metre of altitude (a pixel is over 1.5 m
+    /// measures a tile under 0.63 px of disparity per metre of altitude (a pixel is over 1.6 m
     /// of height) from both views, and a cell keeps their mean height only where both measured
     /// it within 2 m; the others are left to the hole filling (flagged in the _filled sidecar).
-    /// Costs a second match on those tiles.
+    /// The second match runs beside the first on those tiles (about 1.5x their time, twice their
+    /// matching memory); `reconstruct-many` does the same for each pair.
     #[arg(long)]
     single_view: bool,
     /// Altitudes of the scene MIN:MAX, metres. Default: min_alt/max_alt of the JSON cameras, else

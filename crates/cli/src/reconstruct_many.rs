@@ -79,6 +79,10 @@ pub struct ReconstructManyArgs {
     /// Median filter of each pair's DSM before fusion (never fills a cell); 0 or 1 disables it.
     #[arg(long, value_name = "CELLS", default_value_t = 0)]
     pair_median_filter: usize,
+    /// Match each pair's very narrow baselines from the left view only (see `reconstruct
+    /// --single-view`; by default, under 0.63 px/m, a pair keeps the cells both views agree on).
+    #[arg(long)]
+    single_view: bool,
     /// Folder of the pairs' DSMs and tiles (default: OUTPUT without extension + "_work").
     #[arg(long, value_name = "DIR")]
     work: Option<PathBuf>,
@@ -166,6 +170,7 @@ impl ReconstructManyArgs {
         o.fill_holes = pipeline::flags::fill_cells(self.fill_holes);
         o.median_filter = pipeline::flags::median_cells(self.median_filter);
         o.pair_median_filter = pipeline::flags::median_cells(self.pair_median_filter);
+        o.both_views = !self.single_view;
         o.truth = self.truth;
         o.alt_range = self.alt_range;
         o.gridding = self.gridding.into();

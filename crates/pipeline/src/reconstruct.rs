@@ -553,10 +553,7 @@ fn estimate_tiles(scene: &Scene, tiles: &[&Tile]) -> (Vec<Result<Rectification>>
     let memory: Vec<u64> = tiles
         .iter()
         .zip(&rects)
-        .map(|(t, r)| {
-            r.as_ref()
-                .map_or(0, |r| tile_memory(r, t, bands, scene.matcher))
-        })
+        .map(|(t, r)| r.as_ref().map_or(0, |r| tile_memory(r, t, bands, scene)))
         .collect();
     (rects, memory)
 }

@@ -9,20 +9,22 @@
 
 use anyhow::{Context, Result};
 use camera::{rasterize_window, triangulate_disparity, GridWindow, Points};
-use raster::{Image, Mask};
+use raster::Image;
 
 use super::plan::Tile;
-use super::tile::Scene;
-use crate::dsm::valid_pixels;
+use super::tile::{core_mask, Scene};
 use crate::matcher::{Matcher, RangeSource};
 use crate::Silent;
 use camera::rectify::Rectification;
+use matching::DisparityRange;
 
 /// Below this disparity per metre of altitude (raw pixels) the classical matcher measures a tile
-/// from both views. Measured on the dev pairs: the four under 0.65 px/m (0.20–0.62) gain
-/// 0.06 m and 3 points within 1 m; the pairs from 0.72 to 0.99 px/m are mixed (three of six lose
-/// 0.04–0.2 m), where more of the cells one view alone measured are real (wider occlusions).
-pub const BOTH_VIEWS_PIXELS_PER_METRE: f64 = 0.65;
+/// from both views. Measured on the dev pairs: all four under 0.63 px/m (0.20–0.62) gain, by
+/// 0.055 m and 2.2 points within 1 m on average; from 0.72 to 0.99 px/m three of six pairs lose
+/// 0.02–0.2 m, where more of the cells one view alone measured are real (wider occlusions). The
+/// procedural world's standard pair, at 0.65 px/m, loses too (exact cameras, synthetic texture:
+/// its single-view cells are right more often), so the line sits just under it.
+pub const BOTH_VIEWS_PIXELS_PER_METRE: f64 = 0.63;
 
 /// Two views' heights of a cell further apart than this are a mismatch in one of them (1 m and
 /// 2 m are alike on the dev pairs; 2 m keeps more of the procedural world's sharp edges).
@@ -47,25 +49,21 @@ fn mirrored(image: &Image) -> Image {
     Image::new(w, h, c, data).expect("same size")
 }
 
-/// The right view's points: the rectified pair matched with the right image as the reference.
+/// The disparity of the right view of a rectified pair, in the convention `x_other = x − d`.
 ///
 /// Mirrored, the right image becomes a left one with the same disparity range: a right pixel
-/// `x_r` matches the left `x_r + d`, i.e. `(w − 1 − x_r) − d` in the mirrored left. Its
-/// disparity, negated, is a disparity of the right view in the convention `x_other = x − d`, so
-/// the triangulation runs with the roles of the cameras swapped. Only the right pixels whose
-/// left match lands in the tile's core are kept, as for the left view.
-pub fn right_view_points(
-    scene: &Scene,
-    tile: &Tile,
-    rect: &Rectification,
+/// `x_r` matches the left `x_r + d`, i.e. `(w − 1 − x_r) − d` in the mirrored left. Mirrored
+/// back and negated, that disparity gives the left match of each right pixel as `x_r − (−d)`.
+pub fn right_view_disparity(
     matcher: &Matcher,
     (left, right): (&Image, &Image),
-) -> Result<Option<Points>> {
+    range: DisparityRange,
+) -> Result<Image> {
     let matched = matcher
         .disparity(
             &mirrored(right),
             &mirrored(left),
-            RangeSource::Given(rect.disparity_range),
+            RangeSource::Given(range),
             &Silent,
         )?
         .disparity;
@@ -73,28 +71,24 @@ pub fn right_view_points(
     for d in disparity.data_mut() {
         *d = -*d;
     }
-    let h_left_inv = rect
-        .h_left
-        .inverse()
-        .context("the left rectifying homography is singular")?;
-    let core = tile.core;
-    let (cx0, cy0) = (core.x as f64, core.y as f64);
-    let (cx1, cy1) = (cx0 + core.width as f64, cy0 + core.height as f64);
-    let valid = valid_pixels(&disparity, scene.border);
-    let (w, h) = disparity.size();
-    let mask = Mask::from_fn(w, h, |x, y| {
-        if !valid.get(x, y) {
-            return false;
-        }
-        let xl = x as f64 - f64::from(disparity.get(x, y, 0));
-        let (u, v) = h_left_inv.apply(xl + 0.5, y as f64 + 0.5);
-        (cx0..cx1).contains(&u) && (cy0..cy1).contains(&v)
-    });
+    Ok(disparity)
+}
+
+/// The right view's points from its disparity ([`right_view_disparity`]), triangulated with
+/// the roles of the cameras swapped. Only the right pixels whose left match lands in the tile's
+/// core are kept, as for the left view.
+fn right_view_points(
+    scene: &Scene,
+    tile: &Tile,
+    rect: &Rectification,
+    disparity: &Image,
+) -> Result<Option<Points>> {
+    let mask = core_mask(scene, tile, rect, disparity, |x, d| x as f64 - f64::from(d))?;
     if mask.count() == 0 {
         return Ok(None);
     }
     let points = triangulate_disparity(
-        &disparity,
+        disparity,
         &rect.h_right,
         &rect.h_left,
         scene.rpc_right,
@@ -142,20 +136,19 @@ pub fn agreeing_cells(a: &GridWindow, b: &GridWindow) -> Option<GridWindow> {
     })
 }
 
-/// Both views' cells of a tile from the left view's points: the right view matched and
-/// triangulated, both gridded, and only their agreeing cells kept.
+/// Both views' cells of a tile from the left view's points and the right view's disparity: the
+/// right view triangulated, both gridded, and only their agreeing cells kept.
 pub fn both_views_cells(
     scene: &Scene,
     tile: &Tile,
     rect: &Rectification,
-    matcher: &Matcher,
-    images: (&Image, &Image),
+    right_disparity: &Image,
     left_points: &Points,
 ) -> Result<Option<GridWindow>> {
     let Some(left) = rasterize_window(left_points, scene.grid, scene.gridding) else {
         return Ok(None);
     };
-    let Some(points) = right_view_points(scene, tile, rect, matcher, images)? else {
+    let Some(points) = right_view_points(scene, tile, rect, right_disparity)? else {
         return Ok(None);
     };
     let Some(right) = rasterize_window(&points, scene.grid, scene.gridding) else {

@@ -84,6 +84,8 @@ pub struct ReconstructManyOptions {
     pub median_filter: Option<usize>,
     /// Median filter of each pair's DSM before fusion, cells (odd); it never fills a cell.
     pub pair_median_filter: Option<usize>,
+    /// Measure each pair's very narrow tiles from both views ([`super::both_views`]).
+    pub both_views: bool,
     /// Ground truth to score the fused DSM and every pair's against (`grid` = `Like` it).
     pub truth: Option<PathBuf>,
     /// Scene altitudes, metres (else from the JSONs or the RPCs).
@@ -128,6 +130,7 @@ impl ReconstructManyOptions {
             fill_holes: Some(DEFAULT_FILL_CELLS),
             median_filter: Some(FUSED_MEDIAN_CELLS),
             pair_median_filter: None,
+            both_views: true,
             truth: None,
             alt_range: None,
             matcher,
@@ -482,9 +485,7 @@ fn pair_options(
     o.collar = opts.collar;
     o.max_memory = opts.max_memory;
     o.shard = Shard::ALL;
-    // The fusion's agreement between pairs does what both views do within a pair, and needs
-    // each pair's cells: on the six-date world both views cost the fused DSM (BENCHMARKS.md).
-    o.both_views = false;
+    o.both_views = opts.both_views;
     o
 }
 

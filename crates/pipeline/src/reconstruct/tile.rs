@@ -13,7 +13,7 @@ use raster::formats::{write_homographies, write_npy};
 use raster::{Homography, Image, Mask};
 use serde::{Deserialize, Serialize};
 
-use super::both_views::{both_views_cells, wants_both_views};
+use super::both_views::{both_views_cells, right_view_disparity, wants_both_views};
 use super::plan::Tile;
 use super::raw::RawImage;
 use crate::dsm::valid_pixels;
@@ -165,13 +165,25 @@ pub const NARROW_STRETCH: f64 = 2.0;
 
 /// Peak memory of a tile, bytes: the matcher's volumes ([`matching::memory_bytes`]; MonSter++
 /// is bounded by its own budget), both rectified images, the raw windows, the disparity, the
-/// points and the mask.
-pub fn tile_memory(rect: &Rectification, tile: &Tile, bands: usize, matcher: &Matcher) -> u64 {
+/// points and the mask; measured from both views, the two matches run at once and the right
+/// view adds its mirrored images, disparity and points.
+pub fn tile_memory(rect: &Rectification, tile: &Tile, bands: usize, scene: &Scene) -> u64 {
     let (w, h) = rect.size;
-    let matching = matcher.memory_bytes(rect.size, rect.disparity_range);
+    let matching = scene.matcher.memory_bytes(rect.size, rect.disparity_range);
     let px = (w * h) as u64;
     let raw = (tile.extended.width * tile.extended.height) as u64 * bands as u64 * 4 * 3;
-    matching + px * (2 * 4 * bands as u64 + 4 + 24 + 1) + raw
+    let one_view = matching + px * (2 * 4 * bands as u64 + 4 + 24 + 1);
+    let views = if measures_both_views(scene, rect) {
+        2
+    } else {
+        1
+    };
+    views * one_view + raw
+}
+
+/// Whether the scene measures this tile from both views ([`super::both_views`]).
+fn measures_both_views(scene: &Scene, rect: &Rectification) -> bool {
+    scene.both_views && wants_both_views(scene.matcher, raw_pixels_per_metre(rect))
 }
 
 /// Runs one tile: its record, and its cells when it has any.
@@ -185,7 +197,7 @@ pub fn run_tile(
     let mut record = TileRecord {
         disparity_range: Some(rect.disparity_range),
         rectified_size: Some(rect.size),
-        pixels_per_metre: Some(rect.pixels_per_metre / rect.stretch),
+        pixels_per_metre: Some(raw_pixels_per_metre(rect)),
         stretch: Some(rect.stretch),
         ..TileRecord::new(tile, memory_bytes)
     };
@@ -255,14 +267,21 @@ fn match_and_grid(
     let for_baseline = scene.matcher.for_baseline(rect.pixels_per_metre);
     let matcher = for_baseline.as_ref().unwrap_or(scene.matcher);
     record.p2 = matcher.p2();
-    let disparity = matcher
-        .disparity(
-            &left,
-            &right,
-            RangeSource::Given(rect.disparity_range),
-            &Silent,
-        )?
-        .disparity;
+    let both_views = measures_both_views(scene, rect);
+    // Both views at once: half of MGM's time is single-threaded, so two matches share the cores.
+    let (disparity, right_disparity) = rayon::join(
+        || {
+            matcher.disparity(
+                &left,
+                &right,
+                RangeSource::Given(rect.disparity_range),
+                &Silent,
+            )
+        },
+        || both_views.then(|| right_view_disparity(matcher, (&left, &right), rect.disparity_range)),
+    );
+    let disparity = disparity?.disparity;
+    let right_disparity = right_disparity.transpose()?;
     let finite = disparity.data().iter().filter(|v| v.is_finite()).count();
     record.matched = Some(finite as f64 / disparity.data().len().max(1) as f64);
     if let Some(dir) = scene.keep {
@@ -274,21 +293,7 @@ fn match_and_grid(
         keep_files(scene, dir, &name, tile, &left, &right, &disparity, rect)?;
     }
 
-    let h_left_inv = rect
-        .h_left
-        .inverse()
-        .context("the left rectifying homography is singular")?;
-    let core = tile.core;
-    let (cx0, cy0) = (core.x as f64, core.y as f64);
-    let (cx1, cy1) = (cx0 + core.width as f64, cy0 + core.height as f64);
-    let valid = valid_pixels(&disparity, scene.border);
-    let mask = Mask::from_fn(size.0, size.1, |x, y| {
-        if !valid.get(x, y) {
-            return false;
-        }
-        let (u, v) = h_left_inv.apply(x as f64 + 0.5, y as f64 + 0.5);
-        (cx0..cx1).contains(&u) && (cy0..cy1).contains(&v)
-    });
+    let mask = core_mask(scene, tile, rect, &disparity, |x, _| x as f64)?;
     if mask.count() == 0 {
         return Ok(None);
     }
@@ -302,12 +307,45 @@ fn match_and_grid(
     )
     .context("triangulating")?;
     record.points = left_points.valid_count();
-    let raw_pixels_per_metre = rect.pixels_per_metre / rect.stretch;
-    if !(scene.both_views && wants_both_views(scene.matcher, raw_pixels_per_metre)) {
+    let Some(right_disparity) = right_disparity else {
         return Ok(rasterize_window(&left_points, scene.grid, scene.gridding));
-    }
+    };
     record.both_views = Some(true);
-    both_views_cells(scene, tile, rect, matcher, (&left, &right), &left_points)
+    both_views_cells(scene, tile, rect, &right_disparity, &left_points)
+}
+
+/// A tile's disparity per metre of altitude in raw pixels (before any stretch).
+fn raw_pixels_per_metre(rect: &Rectification) -> f64 {
+    rect.pixels_per_metre / rect.stretch
+}
+
+/// The valid pixels of a rectified `disparity` (see [`valid_pixels`]) whose left-view pixel —
+/// the rectified column `left_column(x, d)` of pixel `x` with disparity `d`, on its row — lies in
+/// the tile's core, so that no two tiles claim the same left pixels.
+pub(super) fn core_mask(
+    scene: &Scene,
+    tile: &Tile,
+    rect: &Rectification,
+    disparity: &Image,
+    left_column: impl Fn(usize, f32) -> f64,
+) -> Result<Mask> {
+    let h_left_inv = rect
+        .h_left
+        .inverse()
+        .context("the left rectifying homography is singular")?;
+    let core = tile.core;
+    let (cx0, cy0) = (core.x as f64, core.y as f64);
+    let (cx1, cy1) = (cx0 + core.width as f64, cy0 + core.height as f64);
+    let valid = valid_pixels(disparity, scene.border);
+    let (w, h) = disparity.size();
+    Ok(Mask::from_fn(w, h, |x, y| {
+        if !valid.get(x, y) {
+            return false;
+        }
+        let xl = left_column(x, disparity.get(x, y, 0));
+        let (u, v) = h_left_inv.apply(xl + 0.5, y as f64 + 0.5);
+        (cx0..cx1).contains(&u) && (cy0..cy1).contains(&v)
+    }))
 }
 
 /// The raw window covering `bounds` (raw pixels, with a 2-pixel margin for the interpolation,
