@@ -31,3 +31,19 @@ def test_reconstruct_writes_the_command_line_s_dsm(dev, cli, tmp_path):
     for key, value in SCORES.items():
         assert s["scores"][key] == pytest.approx(value, abs=1e-5), key
 
+
+
+def test_single_view_is_the_command_line_s_and_changes_a_very_narrow_pair(dev, cli, tmp_path):
+    # 014-020 (0.20 px of disparity per metre of altitude) is measured from both views by
+    # default; single_view=True is the command line's --single-view.
+    left, right, rpc_left, rpc_right = images(dev, ("014", "020"))
+    truth = dev / "truth" / "JAX_068_DSM.tif"
+    run_cli(cli, "reconstruct", left, right, "--rpc-left", rpc_left, "--rpc-right", rpc_right,
+            "--like", truth, "--single-view", "-o", tmp_path / "cli.tif")
+    common = dict(rpc_left=rpc_left, rpc_right=rpc_right, like=truth, truth=truth)
+    one = seasonstereo.reconstruct(left, right, out=tmp_path / "one.tif", single_view=True,
+                                   **common)
+    both = seasonstereo.reconstruct(left, right, out=tmp_path / "both.tif", **common)
+    assert filecmp.cmp(tmp_path / "cli.tif", tmp_path / "one.tif", shallow=False)
+    assert not filecmp.cmp(tmp_path / "one.tif", tmp_path / "both.tif", shallow=False)
+    assert both["scores"]["mae_filtered"] < one["scores"]["mae_filtered"] - 0.04

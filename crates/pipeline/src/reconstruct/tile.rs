@@ -292,6 +292,7 @@ fn match_and_grid(
         };
         keep_files(scene, dir, &name, tile, &left, &right, &disparity, rect)?;
     }
+    drop((left, right));
 
     let mask = core_mask(scene, tile, rect, &disparity, |x, _| x as f64)?;
     if mask.count() == 0 {
