@@ -2,7 +2,7 @@
 //! right image as the reference, and a cell keeps a height only where both views measured it
 //! and agree ([`agreeing_cells`]); the others are left to the hole filling.
 //!
-//! Why: under [`BOTH_VIEWS_PIXELS_PER_METRE`] a pixel of disparity is more than 1.5 m of
+//! Why: under [`BOTH_VIEWS_PIXELS_PER_METRE`] a pixel of disparity is more than 1.6 m of
 //! height. The two views' matches have their own census windows, aggregation grid and
 //! sub-pixel errors, so their mean halves the noise, and a cell only one view measured is more
 //! often a mismatch than the ground-first fill is wrong (BENCHMARKS.md).
