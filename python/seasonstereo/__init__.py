@@ -142,8 +142,9 @@ def read_dsm(path: PathLike, utm_zone: Optional[str] = None) -> Dsm:
 
 
 def score(dsm: PathLike, truth: PathLike, utm_zone: Optional[str] = None) -> dict:
-    """The benchmark's scores of a DSM file on the truth's grid against ``truth``
-    (``<AOI>_DSM.tif``, its ``_CLS.tif`` beside it), as ``seasonstereo score``: ``mae_filtered``
+    """The benchmark's scores of a DSM file against ``truth`` (``<AOI>_DSM.tif``, its
+    ``_CLS.tif`` beside it), as ``seasonstereo score``; a DSM on its own grid (s2p's, say) is
+    cut onto the truth's as the benchmark crops it (nearest cell, NaN outside): ``mae_filtered``
     (the benchmark's number), ``mae_raw``, ``mae_no_water``, ``coverage``, ``dx``, ``dy``,
     ``offset``, ..."""
     return _native.score(dsm, truth, utm_zone)

@@ -107,9 +107,9 @@ pub fn read_dsm<'py>(py: Python<'py>, path: PathBuf, utm_zone: Option<&str>) -> 
     Ok((to_numpy(py, raster.image)?, t, c))
 }
 
-/// The benchmark's scores of the DSM file `dsm` (on the truth's grid) against the ground truth
-/// `truth` (`<AOI>_DSM.tif`, its `_CLS.tif` beside it); `utm_zone` as in [`read_dsm`], by
-/// default the DSM's.
+/// The benchmark's scores of the DSM file `dsm` (on the truth's grid, or cut onto it) against
+/// the ground truth `truth` (`<AOI>_DSM.tif`, its `_CLS.tif` beside it); `utm_zone` as in
+/// [`read_dsm`], by default the DSM's.
 #[pyfunction]
 #[pyo3(signature = (dsm, truth, utm_zone=None))]
 pub fn score(

@@ -91,3 +91,5 @@ def test_score_on_the_dev_truth_is_the_command_line_s(dev, cli, tmp_path):
     print({k: scores[k] for k in S2P_SCORES})
     for key, value in S2P_SCORES.items():
         assert scores[key] == pytest.approx(value, abs=1e-5), key
+    # s2p's DSM as s2p wrote it, on its own grid, is cut onto the truth's: the same scores.
+    assert seasonstereo.score(dev / "s2p" / f"{PAIR[0]}-{PAIR[1]}.tif", truth_of(dev)) == scores

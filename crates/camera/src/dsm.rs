@@ -188,6 +188,36 @@ impl DsmGrid {
     }
 }
 
+/// The heights of `image` (lying on `from`) at the centres of the cells of `onto`: the nearest
+/// cell, NaN outside `from`. For one cell size and zone this is the benchmark's crop of any DSM
+/// onto the truth's window (GDAL's `projWin` snaps the window to whole cells, which is the
+/// nearest cell here); across cell sizes or UTM zones it is a nearest-cell resampling (through
+/// longitude and latitude when the zones differ).
+pub fn resample_nearest(image: &Image, from: &DsmGrid, onto: &DsmGrid) -> Image {
+    let src = image.channel(0);
+    let data = src.data();
+    let (zone_from, zone_onto) = (from.zone(), onto.zone());
+    let same_zone = from.epsg == onto.epsg;
+    let out: Vec<f32> = (0..onto.height)
+        .into_par_iter()
+        .flat_map_iter(|r| {
+            let northing = onto.y0 - (r as f64 + 0.5) * onto.resolution;
+            (0..onto.width).map(move |c| {
+                let easting = onto.x0 + (c as f64 + 0.5) * onto.resolution;
+                let (e, n) = if same_zone {
+                    (easting, northing)
+                } else {
+                    let (lon, lat) = zone_onto.inverse(easting, northing);
+                    zone_from.forward(lon, lat)
+                };
+                from.cell_of(e, n)
+                    .map_or(f32::NAN, |(col, row)| data[row * from.width + col])
+            })
+        })
+        .collect();
+    Image::new(onto.width, onto.height, 1, out).expect("one value per cell")
+}
+
 /// A DSM read from disk: heights (nodata mapped to NaN) and the grid they lie on.
 #[derive(Clone, Debug)]
 pub struct DsmRaster {

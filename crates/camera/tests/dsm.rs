@@ -236,3 +236,76 @@ fn median_filter_removes_a_spike_keeps_an_edge_and_the_holes() {
     let same = camera::median_filter(&dsm, 1);
     assert_eq!(same.get(6, 2, 0), 30.0);
 }
+
+/// A DSM whose cell (col, row) holds `100·col + row`, to read back where each value came from.
+fn labelled(grid: &DsmGrid) -> Image {
+    Image::from_fn(grid.width, grid.height, |c, r| (100 * c + r) as f32)
+}
+
+#[test]
+fn a_dsm_on_another_window_is_cut_onto_the_grid_cell_for_cell() {
+    let from = DsmGrid::new(436080.5, 3357759.0, 0.5, 10, 8, 32617).unwrap();
+    // The truth-like window starts 2.02 cells east and 1 cell south of the DSM's corner, as
+    // s2p's grid and the DFC2019 truth's do (up to the fraction of a cell).
+    let onto = DsmGrid::new(436080.5 + 1.01, 3357759.0 - 0.5, 0.5, 9, 8, 32617).unwrap();
+    let out = camera::resample_nearest(&labelled(&from), &from, &onto);
+    assert_eq!(out.size(), (9, 8));
+    for r in 0..8 {
+        for c in 0..9 {
+            let v = out.get(c, r, 0);
+            if c + 2 < 10 && r + 1 < 8 {
+                assert_eq!(v, (100 * (c + 2) + r + 1) as f32, "cell {c},{r}");
+            } else {
+                assert!(v.is_nan(), "cell {c},{r} is outside the DSM: {v}");
+            }
+        }
+    }
+    // The same grid gives the DSM back, cell for cell.
+    let same = camera::resample_nearest(&labelled(&from), &from, &from);
+    assert_eq!(same.data(), labelled(&from).data());
+}
+
+#[test]
+fn resampling_to_coarser_cells_takes_the_cell_under_each_centre() {
+    let from = DsmGrid::new(436000.0, 3358000.0, 0.5, 8, 8, 32617).unwrap();
+    let onto = DsmGrid::new(436000.0, 3358000.0, 1.0, 4, 4, 32617).unwrap();
+    let out = camera::resample_nearest(&labelled(&from), &from, &onto);
+    for r in 0..4 {
+        for c in 0..4 {
+            assert_eq!(out.get(c, r, 0), (100 * (2 * c + 1) + 2 * r + 1) as f32);
+        }
+    }
+    // A window that misses the DSM is all empty.
+    let away = DsmGrid::new(437000.0, 3358000.0, 0.5, 4, 4, 32617).unwrap();
+    let none = camera::resample_nearest(&labelled(&from), &from, &away);
+    assert!(none.data().iter().all(|v| v.is_nan()));
+}
+
+#[test]
+fn a_dsm_in_the_neighbouring_utm_zone_is_resampled_through_longitude_and_latitude() {
+    // Near −78°, the edge between zones 17N and 18N: the same place in both.
+    let (z17, z18) = (
+        UtmZone::new(17, true).unwrap(),
+        UtmZone::new(18, true).unwrap(),
+    );
+    let (e18, n18) = z18.forward(-78.0005, 30.3);
+    let from = DsmGrid::new(e18 - 20.0, n18 + 20.0, 1.0, 40, 40, 32618).unwrap();
+    let (e17, n17) = z17.forward(-78.0005, 30.3);
+    let onto = DsmGrid::new(e17 - 10.0, n17 + 10.0, 0.5, 40, 40, 32617).unwrap();
+    let out = camera::resample_nearest(&labelled(&from), &from, &onto);
+    for r in 0..40 {
+        for c in 0..40 {
+            let v = out.get(c, r, 0);
+            assert!(v.is_finite(), "cell {c},{r} lies inside the DSM");
+            let (col, row) = ((v as usize) / 100, (v as usize) % 100);
+            // The onto cell's centre, in zone 18, lies in the cell its value came from.
+            let centre = (
+                onto.x0 + (c as f64 + 0.5) * 0.5,
+                onto.y0 - (r as f64 + 0.5) * 0.5,
+            );
+            let (lon, lat) = z17.inverse(centre.0, centre.1);
+            let (e, n) = z18.forward(lon, lat);
+            assert_eq!(from.cell_of(e, n), Some((col, row)), "cell {c},{r}");
+        }
+    }
+}

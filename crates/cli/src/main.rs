@@ -77,7 +77,8 @@ enum Command {
     /// height cluster), holes filled where no pair measured or too few agreed; count and spread
     /// rasters, a report. Exit 2 when some pairs failed, 3 when none produced a DSM.
     ReconstructMany(reconstruct_many::ReconstructManyArgs),
-    /// Score DSMs on a ground truth's grid with the benchmark's metric (MAE and coverage).
+    /// Score DSMs against a ground truth with the benchmark's metric (MAE and coverage); a DSM on
+    /// its own grid is cut onto the truth's.
     Score(score::ScoreArgs),
     /// Time the networks (MonSter++, SegFormer, DINOv3, a training step) with random weights:
     /// median and min over N runs after a warm-up, peak RSS, --json; or a whole-scene DSM merge.

@@ -49,20 +49,22 @@ fn format_versus(v: &Versus) -> String {
 
 #[derive(Args)]
 #[command(
-    after_help = "The benchmark's metric on any DSM already on the truth's grid (e.g. \
-    from `reconstruct --like`, `dsm --like`, or s2p): integer (dx, dy) shift within ±5 cells \
+    after_help = "The benchmark's metric on any georeferenced DSM (e.g. from `reconstruct \
+    --like`, `dsm --like`, or s2p on its own grid). A DSM on another window, cell size or UTM \
+    zone is first cut onto the truth's grid as the benchmark crops it (the nearest cell to each \
+    truth cell's centre, NaN outside; the log says so). Then: integer (dx, dy) shift within ±5 cells \
     maximising NCC, vertical offset b = mean(truth) − mean(DSM), MAE over cells where both exist \
     (filtered: without foliage 5 and water 9 of <AOI>_CLS.tif), coverage = share of truth cells \
     with a value, within 1 m / 2 m = share of the truth cells outside foliage and water whose \
     registered height is within 1 m / 2 m (a missing cell is a miss: the figure rewards \
     coverage and accuracy at once).\n\n\
-    With --against OTHER each DSM and OTHER (e.g. s2p's DSM cut onto the truth grid) are \
+    With --against OTHER each DSM and OTHER (e.g. s2p's DSM) are \
     registered on their own, then compared cell by cell: the MAE of each on the truth cells \
     both cover (the fair ranking), the MAE of the cells only one covers, and the cells neither \
     covers."
 )]
 pub struct ScoreArgs {
-    /// DSMs to score (GeoTIFF on the truth's grid).
+    /// DSMs to score (GeoTIFF, on the truth's grid or cut onto it).
     #[arg(required = true)]
     dsm: Vec<PathBuf>,
     /// Ground truth <AOI>_DSM.tif (GeoTIFF, or DFC2019 plain TIFF + <AOI>_DSM.txt); its
@@ -73,7 +75,7 @@ pub struct ScoreArgs {
     /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
     #[arg(long, value_name = "ZONE", value_parser = pipeline::flags::utm_zone)]
     utm_zone: Option<camera::UtmZone>,
-    /// Compare each DSM with this one (another method's DSM on the truth's grid) on the cells
+    /// Compare each DSM with this one (another method's DSM, cut onto the truth's grid) on the cells
     /// both cover and on those only one covers.
     #[arg(long, value_name = "DSM")]
     against: Option<PathBuf>,
@@ -112,8 +114,31 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     Ok(())
 }
 
+/// Says when the DSM at `path` is not on the truth's grid and is cut onto it, so that no one
+/// takes its scores for those of a DSM made on that grid. (A DSM that cannot be read is
+/// reported by the scoring itself.)
+fn note_cut(path: &Path, truth: &Truth) {
+    let Ok(grid) = camera::DsmGrid::read(path, Some(truth.grid.zone())) else {
+        return;
+    };
+    if grid != truth.grid {
+        eprintln!(
+            "{}: on its own grid ({}x{} cells of {} m from {:.2}, {:.2}, EPSG {}); cut onto the \
+             truth's grid (nearest cell, NaN outside)",
+            path.display(),
+            grid.width,
+            grid.height,
+            grid.resolution,
+            grid.x0,
+            grid.y0,
+            grid.epsg
+        );
+    }
+}
+
 /// Prints one DSM's scores; its JSON record.
 fn score_one(path: &Path, truth: &Truth) -> Result<serde_json::Value> {
+    note_cut(path, truth);
     let s = score(path, truth)?;
     println!("{}: {}", path.display(), format_scores(&s));
     Ok(serde_json::to_value(&s)?)
@@ -121,6 +146,8 @@ fn score_one(path: &Path, truth: &Truth) -> Result<serde_json::Value> {
 
 /// Prints a DSM's and the other's scores and their comparison; the comparison's JSON record.
 fn score_one_against(path: &Path, other: &Path, truth: &Truth) -> Result<serde_json::Value> {
+    note_cut(path, truth);
+    note_cut(other, truth);
     let v = score_against(path, other, truth)?;
     println!("{}: {}", path.display(), format_scores(&v.ours));
     println!("{}: {}", other.display(), format_scores(&v.other));

@@ -991,6 +991,50 @@ fn reconstruct_a_real_pair_then_score_it_on_the_dfc2019_truth() {
     assert!(stderr(&o).contains("--like"), "{}", stderr(&o));
 }
 
+/// s2p's DSMs as s2p writes them (each on its own 0.5 m grid) are scored and compared as the
+/// benchmark does: cut onto the truth's grid, which the log says; the scores are those of the
+/// set's copies already cut onto it.
+#[test]
+fn score_cuts_s2p_dsms_on_their_own_grid_onto_the_truth_and_compares_them() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let p = |rel: &str| d.join(rel).to_str().unwrap().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("versus.jsonl");
+    let truth = p("truth/JAX_068_DSM.tif");
+    let o = seasonstereo(&[
+        "score",
+        &p("s2p/013-014.tif"),
+        "--against",
+        &p("s2p/006-020.tif"),
+        "--truth",
+        &truth,
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let log = stderr(&o);
+    for pair in [
+        "013-014.tif: on its own grid",
+        "006-020.tif: on its own grid",
+    ] {
+        assert!(log.contains(pair), "{log}");
+    }
+    assert!(log.contains("cut onto the truth's grid"), "{log}");
+    let v: serde_json::Value =
+        serde_json::from_str(std::fs::read_to_string(&json).unwrap().trim()).unwrap();
+    assert!(v["common_ours"]["cells"].as_u64().unwrap() > 100_000, "{v}");
+    // The same figures as the copies on the truth's grid, which the log does not mention.
+    let o = seasonstereo(&["score", &p("s2p/truth-grid/013-014.tif"), "--truth", &truth]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("own grid"), "{}", stderr(&o));
+    let copy = String::from_utf8_lossy(&o.stdout);
+    let mae = format!(
+        "MAE filtered {:.3} m",
+        v["ours"]["mae_filtered"].as_f64().unwrap()
+    );
+    assert!(copy.contains(&mae), "{copy} vs {mae}");
+}
+
 /// `bench` times a workload after a warm-up and prints one JSON line; bad presets are refused.
 #[test]
 fn bench_times_a_network_pass_and_prints_json() {

@@ -1,6 +1,7 @@
 //! Scoring a DSM file against a ground truth with the benchmark's metric (registration by an
 //! integer NCC shift and a vertical offset, foliage and water masked), whoever made the DSM:
-//! `seasonstereo reconstruct`, `dsm`, or another tool such as s2p, on the truth's grid; and
+//! `seasonstereo reconstruct`, `dsm`, or another tool such as s2p, on the truth's grid or cut
+//! onto it as the benchmark crops any georeferenced DSM; and
 //! two DSMs against each other on the cells both cover ([`score_versus_files`]).
 
 use std::path::Path;
@@ -54,16 +55,16 @@ pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
     Truth::read(&files, aoi, zone)
 }
 
-/// Scores the DSM at `path` (on the truth's grid) against `truth`.
+/// Scores the DSM at `path` (on the truth's grid or cut onto it) against `truth`.
 pub fn score_dsm_file(path: &Path, truth: &Truth) -> Result<DsmScores> {
     let image = read_on_truth_grid(path, truth)?;
     score_dsm(&image, &truth.dsm, &truth.exclusions, &Default::default())
         .with_context(|| format!("scoring {}", path.display()))
 }
 
-/// Scores the DSMs at `ours` and `other` (both on the truth's grid) against `truth`, each
-/// registered on its own, and compares them on the cells both cover and on those only one
-/// covers ([`crate::eval::versus`]).
+/// Scores the DSMs at `ours` and `other` (each on the truth's grid or cut onto it) against
+/// `truth`, each registered on its own, and compares them on the cells both cover and on those
+/// only one covers ([`crate::eval::versus`]).
 pub fn score_versus_files(ours: &Path, other: &Path, truth: &Truth) -> Result<Versus> {
     let a = read_on_truth_grid(ours, truth)?;
     let b = read_on_truth_grid(other, truth)?;
@@ -71,23 +72,35 @@ pub fn score_versus_files(ours: &Path, other: &Path, truth: &Truth) -> Result<Ve
         .with_context(|| format!("scoring {} against {}", ours.display(), other.display()))
 }
 
-/// The heights of the DSM at `path`, refused unless it lies on the truth's grid.
-fn read_on_truth_grid(path: &Path, truth: &Truth) -> Result<raster::Image> {
+/// The heights of the DSM at `path` on the truth's grid: as they are when the DSM lies on it,
+/// else cut onto it as the benchmark crops any georeferenced DSM onto the truth's window
+/// ([`camera::resample_nearest`]: the nearest cell, NaN outside; a resampling for another cell
+/// size or UTM zone). A DSM that covers none of the truth is an error.
+pub fn read_on_truth_grid(path: &Path, truth: &Truth) -> Result<raster::Image> {
     let zone = truth.grid.zone();
     let DsmRaster { image, grid, .. } = camera::read_dsm(path, Some(zone))
         .with_context(|| format!("reading the DSM {}", path.display()))?;
-    if grid != truth.grid {
+    if grid == truth.grid {
+        return Ok(image);
+    }
+    let cut = camera::resample_nearest(&image, &grid, &truth.grid);
+    if !cut.data().iter().any(|v| v.is_finite()) {
         bail!(
-            "{}: the DSM is not on the ground truth's grid ({}x{} cells of {} m at {:.2}, {:.2}); \
-             make it with --like {}_DSM.tif",
+            "{}: the DSM has no height inside the ground truth's area ({} m cells from {:.2}, \
+             {:.2}, EPSG {}; the truth's {}x{} cells of {} m from {:.2}, {:.2}, EPSG {}): is it \
+             of another area, or in another UTM zone than its tags say?",
             path.display(),
+            grid.resolution,
+            grid.x0,
+            grid.y0,
+            grid.epsg,
             truth.grid.width,
             truth.grid.height,
             truth.grid.resolution,
             truth.grid.x0,
             truth.grid.y0,
-            truth.aoi
+            truth.grid.epsg
         );
     }
-    Ok(image)
+    Ok(cut)
 }

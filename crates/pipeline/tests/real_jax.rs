@@ -118,16 +118,33 @@ fn dfc2019_truth_as_distributed_scores_a_dsm() {
         s.cells + foliage,
         truth.dsm.data().iter().filter(|v| v.is_finite()).count()
     );
-    // A DSM on another grid is refused with the fix.
+    // A DSM on another window is cut onto the truth's grid: the truth written two cells east is
+    // found again by the registration's shift, with no error on the cells it still covers.
     let other =
         camera::DsmGrid::new(truth.grid.x0 + 1.0, truth.grid.y0, 0.5, 512, 512, 32617).unwrap();
     let off = dir.path().join("off.tif");
     camera::write_dsm(&off, &truth.dsm, &other).unwrap();
+    let s = pipeline::score::score_dsm_file(&off, &truth).unwrap();
+    assert_eq!((s.dx.abs(), s.dy), (2, 0), "{s:?}");
+    assert!(s.mae_filtered.unwrap() < 1e-6, "{s:?}");
+    let coverage = s.coverage.unwrap();
+    assert!(
+        (0.99..0.997).contains(&coverage),
+        "two columns of 512 are gone: {coverage}"
+    );
+    // A DSM of another area is refused, naming both grids.
+    let away =
+        camera::DsmGrid::new(truth.grid.x0 + 5000.0, truth.grid.y0, 0.5, 512, 512, 32617).unwrap();
+    let far = dir.path().join("far.tif");
+    camera::write_dsm(&far, &truth.dsm, &away).unwrap();
     let msg = format!(
         "{:#}",
-        pipeline::score::score_dsm_file(&off, &truth).unwrap_err()
+        pipeline::score::score_dsm_file(&far, &truth).unwrap_err()
     );
-    assert!(msg.contains("--like"), "{msg}");
+    assert!(
+        msg.contains("far.tif") && msg.contains("no height inside the ground truth's area"),
+        "{msg}"
+    );
 }
 
 /// Whole scenes are cut into tiles, each rectified on its own: on a real crop, 256-pixel tiles

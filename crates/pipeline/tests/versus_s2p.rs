@@ -1,10 +1,11 @@
 //! Two DSMs compared on the cells both cover (`score --against`), on real data: s2p's DSMs of
 //! the DFC2019 JAX_068 development pairs cut onto the truth's grid (`s2p/truth-grid/`), whose
-//! scores the set's README lists (MAE filtered, coverage, within 1 m).
+//! scores the set's README lists (MAE filtered, coverage, within 1 m); and s2p's DSMs on their
+//! own grid, which `score` cuts onto the truth's.
 
 use camera::UtmZone;
 use pipeline::eval::Truth;
-use pipeline::score::{read_truth, score_dsm_file, score_versus_files};
+use pipeline::score::{read_on_truth_grid, read_truth, score_dsm_file, score_versus_files};
 
 mod common;
 use common::jax;
@@ -84,4 +85,44 @@ fn two_s2p_dsms_split_the_truth_cells_and_their_maes_add_up() {
     // Swapping the two swaps the figures.
     let w = score_versus_files(&cross, &near, &truth).unwrap();
     assert_eq!((w.common_ours, w.only_ours), (v.common_other, v.only_other));
+}
+
+#[test]
+fn s2p_dsms_on_their_own_grid_are_cut_onto_the_truth_s_as_the_set_s_truth_grid_copies() {
+    testdata::require!(common::JAX_DEV);
+    let truth = truth();
+    let pairs: Vec<String> = std::fs::read_dir(jax("s2p"))
+        .unwrap()
+        .filter_map(|e| {
+            let name = e.unwrap().file_name().into_string().unwrap();
+            name.strip_suffix(".tif").map(str::to_owned)
+        })
+        .collect();
+    assert_eq!(pairs.len(), 12, "{pairs:?}");
+    for pair in &pairs {
+        let native = jax(&format!("s2p/{pair}.tif"));
+        let copy = jax(&format!("s2p/truth-grid/{pair}.tif"));
+        let own = camera::DsmGrid::read(&native, None).unwrap();
+        assert_ne!(own, truth.grid, "{pair}: s2p's grid is its own");
+        // Cell for cell the set's copy (nearest cell, NaN outside).
+        let cut = read_on_truth_grid(&native, &truth).unwrap();
+        let expected = camera::read_dsm(&copy, None).unwrap().image;
+        let same = |a: f32, b: f32| a == b || (a.is_nan() && b.is_nan());
+        let differ = (cut.data().iter().zip(expected.data()))
+            .filter(|(a, b)| !same(**a, **b))
+            .count();
+        assert_eq!(differ, 0, "{pair}: cells that differ from the copy");
+        assert_eq!(
+            score_dsm_file(&native, &truth).unwrap(),
+            score_dsm_file(&copy, &truth).unwrap(),
+            "{pair}"
+        );
+    }
+    // Against another method, the native file stands for its copy too.
+    let (native, copy) = (jax("s2p/014-015.tif"), jax("s2p/truth-grid/014-015.tif"));
+    let other = jax("s2p/truth-grid/013-014.tif");
+    assert_eq!(
+        score_versus_files(&native, &other, &truth).unwrap(),
+        score_versus_files(&copy, &other, &truth).unwrap()
+    );
 }

@@ -191,14 +191,16 @@ pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
     pipeline::score::read_truth(dsm, zone)
 }
 
-/// The benchmark's metric on a DSM already on the truth's grid: the integer shift within ±5
+/// The benchmark's metric on a DSM (on the truth's grid, or on its own and cut onto the truth's
+/// as the benchmark crops: nearest cell, NaN outside): the integer shift within ±5
 /// cells that maximises NCC, the vertical offset, MAE over the cells both have (raw, without
 /// water, without foliage and water) and the truth's coverage.
 pub fn score(dsm: &Path, truth: &Truth) -> Result<DsmScores> {
     pipeline::score::score_dsm_file(dsm, truth)
 }
 
-/// Two DSMs already on the truth's grid ("ours" and another method's, e.g. s2p's) scored by the
+/// Two DSMs ("ours" and another method's, e.g. s2p's; each cut onto the truth's grid as in
+/// [`score`]) scored by the
 /// benchmark's metric, each registered on its own, then compared cell by cell: the MAE of each
 /// on the truth cells both cover, the MAE of the cells only one covers, and each one's coverage
 /// and share of truth cells within 1 m and 2 m. Two MAEs over different cells do not rank two
