@@ -400,6 +400,78 @@ fn disparities(h_left: &Homography, h_right: &Homography, ground: &[GroundMatch]
         .collect()
 }
 
+/// Whether the right rectified image is sheared to level the ground ([`level_shear`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Shear {
+    /// One altitude, one disparity: the search range is the altitudes' alone (the default).
+    #[default]
+    Level,
+    /// The rectifying similarities only: the ground's disparity may tilt across the frame.
+    None,
+}
+
+/// The horizontal shear of the right rectified image, `x_R' = (1 + s)·x_R + t·y`, after which a
+/// ground altitude has one disparity over the whole region: the least-squares plane
+/// `d = a·x_L + b·y + γ·alt + c` of the camera matches loses its `a` and `b`. Rows stay rows; the
+/// disparity range is then what the altitudes span, not that plus the tilt of the ground's
+/// disparity across the frame (tens of pixels on a 1000-pixel tile of a narrow pair), which every
+/// matcher would otherwise search. s2p shears its right image for the same reason. The identity
+/// when the matches do not determine the plane.
+fn level_shear(hl: &Homography, hr: &Homography, ground: &[GroundMatch]) -> Homography {
+    let d = disparities(hl, hr, ground);
+    let rows: Vec<[f64; 3]> = ground
+        .iter()
+        .map(|g| {
+            let (x, y) = hl.apply(g.left.0, g.left.1);
+            [x, y, g.alt()]
+        })
+        .collect();
+    let n = rows.len() as f64;
+    let mean: [f64; 3] = std::array::from_fn(|i| rows.iter().map(|r| r[i]).sum::<f64>() / n);
+    let d_mean = d.iter().sum::<f64>() / n;
+    let (mut m, mut v) = ([[0.0; 3]; 3], [0.0; 3]);
+    for (r, di) in rows.iter().zip(&d) {
+        let c: [f64; 3] = std::array::from_fn(|i| r[i] - mean[i]);
+        for i in 0..3 {
+            v[i] += c[i] * (di - d_mean);
+            for j in 0..3 {
+                m[i][j] += c[i] * c[j];
+            }
+        }
+    }
+    let identity = Homography([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+    let Some([a, b, _]) = solve3(m, v) else {
+        return identity;
+    };
+    if !(a.is_finite() && b.is_finite()) || (1.0 - a).abs() < 0.5 {
+        return identity;
+    }
+    // d' = d − s·x_R − t·y with x_R = x_L − d: no x_L or y term when s = a / (1 − a), t = b / (1 − a).
+    let (s, t) = (a / (1.0 - a), b / (1.0 - a));
+    Homography([[1.0 + s, t, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+}
+
+/// The solution of the 3×3 system `m·x = v` (Cramer's rule); `None` when `m` is singular.
+fn solve3(m: [[f64; 3]; 3], v: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&m);
+    let scale = m.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
+    if !(d.is_finite() && d.abs() > 1e-12 * scale.powi(3)) {
+        return None;
+    }
+    Some(std::array::from_fn(|k| {
+        let mut mk = m;
+        for (row, vi) in mk.iter_mut().zip(&v) {
+            row[k] = *vi;
+        }
+        det(&mk) / d
+    }))
+}
+
 /// A rectification of a pair: the homographies (raw → rectified, flip included), the rectified
 /// frame and what the cameras say about it.
 #[derive(Clone, Debug, PartialEq)]
@@ -498,9 +570,11 @@ pub fn disparity_range(
 /// 1. the [`rectifying_similarities`] of `f`;
 /// 2. a flip of x in both images when disparity `x'_L − x'_R` decreases with altitude (fitted
 ///    over all matches), so that it grows with altitude;
-/// 3. a horizontal shift of the right image that gives the lowest disparity of the matches the
+/// 3. with [`Shear::Level`], a horizontal shear of the right image after which one altitude
+///    has one disparity over the region ([`level_shear`]);
+/// 4. a horizontal shift of the right image that gives the lowest disparity of the matches the
 ///    value [`LOWEST_DISPARITY`];
-/// 4. a common integer translation (it changes neither rows nor disparities) that puts the
+/// 5. a common integer translation (it changes neither rows nor disparities) that puts the
 ///    bounding box of the region of interest's image at `(D, 0)`, `D = max(0, MAX)` of the
 ///    disparity range, so that every pixel of the region finds its match, `D` pixels to its left at
 ///    most, inside the frame.
@@ -508,6 +582,7 @@ pub fn rectifying_homographies(
     f: &[[f64; 3]; 3],
     ground: &[GroundMatch],
     roi: Roi,
+    shear: Shear,
 ) -> Result<Rectification> {
     if ground.len() < 2 {
         return Err(RectifyError::TooFewMatches(ground.len()));
@@ -550,6 +625,19 @@ pub fn rectifying_homographies(
         hl = flip.compose(&hl);
         hr = flip.compose(&hr);
     }
+    if shear == Shear::Level {
+        hr = level_shear(&hl, &hr, ground).compose(&hr);
+    }
+    let slope = {
+        let d = disparities(&hl, &hr, ground);
+        let d_mean = d.iter().sum::<f64>() / n;
+        let sxy: f64 = alts
+            .iter()
+            .zip(&d)
+            .map(|(a, di)| (a - alt_mean) * (di - d_mean))
+            .sum();
+        sxy / sxx
+    };
 
     // Relative horizontal shift: the lowest disparity becomes LOWEST_DISPARITY.
     let d_low = disparities(&hl, &hr, ground)
@@ -660,17 +748,28 @@ pub fn rectify_pair(
 }
 
 /// The geometry of [`rectify_pair`] without warping any image: camera matches, affine
-/// fundamental matrix, rectifying homographies and frame.
+/// fundamental matrix, rectifying homographies (ground levelled) and frame.
 pub fn rectification(
     left_camera: &impl Camera,
     right_camera: &impl Camera,
     roi: Roi,
     alt_range: (f64, f64),
 ) -> Result<Rectification> {
+    rectification_with(left_camera, right_camera, roi, alt_range, Shear::Level)
+}
+
+/// [`rectification`] with the right image's shear chosen.
+pub fn rectification_with(
+    left_camera: &impl Camera,
+    right_camera: &impl Camera,
+    roi: Roi,
+    alt_range: (f64, f64),
+    shear: Shear,
+) -> Result<Rectification> {
     let ground = matches_from_cameras(left_camera, right_camera, roi, alt_range)?;
     let pairs: Vec<Match> = ground.iter().map(GroundMatch::pair).collect();
     let f = affine_fundamental(&pairs)?;
-    rectifying_homographies(&f, &ground, roi)
+    rectifying_homographies(&f, &ground, roi, shear)
 }
 
 #[cfg(test)]

@@ -3,9 +3,9 @@
 //! triangulated and compared with s2p's DSM.
 
 use camera::rectify::{
-    affine_fundamental, matches_from_cameras, rectification, rectify_pair, rectifying_homographies,
-    rectifying_similarities, Camera, GroundMatch, Match, RectifyError, Roi, GRID_ALTITUDES,
-    GRID_POINTS,
+    affine_fundamental, matches_from_cameras, rectification, rectification_with, rectify_pair,
+    rectifying_homographies, rectifying_similarities, Camera, GroundMatch, Match, RectifyError,
+    Roi, Shear, GRID_ALTITUDES, GRID_POINTS,
 };
 use raster::{Homography, Image};
 
@@ -206,6 +206,54 @@ fn homographies_align_rows_and_make_disparity_grow_with_altitude() {
     assert!(flips >= 1, "the pair list should exercise the flip");
 }
 
+/// The right image's shear levels the ground: one altitude has one disparity over the whole
+/// region, so the search range is the altitude range's width and no more, even for views
+/// rotated or scaled against each other (whose ground disparity otherwise tilts across the frame).
+#[test]
+fn one_altitude_has_one_disparity_and_the_range_is_the_altitudes_alone() {
+    for (name, l, r) in pairs() {
+        let rect = rectification(&l, &r, ROI, ALT).unwrap();
+        let (lo, hi) = rect.disparity_range;
+        let span = rect.pixels_per_metre * (ALT.1 - ALT.0);
+        assert!(
+            ((hi - lo) as f64) <= span + 3.0,
+            "{name}: range {lo}..{hi} for {span:.1} px of altitudes"
+        );
+        for z in [ALT.0, 10.0, ALT.1] {
+            let d: Vec<f64> = (0..40)
+                .map(|i| {
+                    let t = i as f64;
+                    let col = ROI.x as f64 + (t * 41.7) % ROI.width as f64;
+                    let row = ROI.y as f64 + (t * 29.3) % ROI.height as f64;
+                    let (pl, pr) = rectified(&rect.h_left, &rect.h_right, &l, &r, (col, row, z));
+                    pl.0 - pr.0
+                })
+                .collect();
+            let spread = d.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+                - d.iter().cloned().fold(f64::INFINITY, f64::min);
+            assert!(
+                spread < 1e-6,
+                "{name}: disparities at {z} m spread {spread} px"
+            );
+        }
+        // Without the shear, views rotated or scaled against each other search more.
+        let plain = rectification_with(&l, &r, ROI, ALT, Shear::None).unwrap();
+        let width = |r: (i32, i32)| r.1 - r.0;
+        assert!(
+            width(plain.disparity_range) >= width(rect.disparity_range),
+            "{name}"
+        );
+        if name == "different scales" {
+            assert!(
+                width(plain.disparity_range) > width(rect.disparity_range) + 20,
+                "{name}: {:?} against {:?}",
+                plain.disparity_range,
+                rect.disparity_range
+            );
+        }
+    }
+}
+
 #[test]
 fn a_stretched_rectification_multiplies_disparities_and_keeps_rows() {
     for (name, l, r) in pairs() {
@@ -321,7 +369,7 @@ fn errors() {
     } else {
         one_alt
     };
-    let e = rectifying_homographies(&f, &one_alt, ROI).unwrap_err();
+    let e = rectifying_homographies(&f, &one_alt, ROI, Shear::Level).unwrap_err();
     assert!(e.to_string().contains("one altitude"), "{e}");
 
     // No baseline: the same camera twice.

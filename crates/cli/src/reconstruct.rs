@@ -17,8 +17,10 @@ use crate::args::{
 
 #[derive(Args)]
 #[command(
-    after_help = "Steps: rectify (RPCs; the disparity range follows from the scene's \
-    altitudes), match (census + MGM by default; --method sgm; or --model monsterpp --weights W; \
+    after_help = "Steps: rectify (RPCs; the right image is sheared so that one altitude has one \
+    disparity over the tile, and the disparity range is then what the scene's altitudes span, \
+    --alt-range or the cameras' min_alt/max_alt: give them wide enough for the tallest building), \
+    match (census + MGM by default; --method sgm; or --model monsterpp --weights W; \
     on very narrow baselines, under 0.4 px of disparity per metre of altitude, the classical \
     matcher works on rows stretched 2x for half-pixel steps; under 0.63 px/m it matches from both \
     views and keeps the cells they agree on, see --single-view), triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
@@ -81,8 +83,9 @@ pub struct ReconstructArgs {
     /// matching memory); `reconstruct-many` does the same for each pair.
     #[arg(long)]
     single_view: bool,
-    /// Altitudes of the scene MIN:MAX, metres. Default: min_alt/max_alt of the JSON cameras, else
-    /// the RPCs' altitude offset ± scale.
+    /// Altitudes of the scene MIN:MAX, metres: the disparity search covers them and little more
+    /// (heights outside are not found). Default: min_alt/max_alt of the JSON cameras, else the
+    /// RPCs' altitude offset ± scale.
     #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
     alt_range: Option<(f64, f64)>,
     /// Folder of the intermediate files (default: OUTPUT without extension + "_work").
@@ -189,6 +192,7 @@ impl ReconstructArgs {
             complete_only: self.merge && !crate::exit::safety().allow_partial,
             keep_intermediates: self.keep_intermediates,
             both_views: !self.single_view,
+            level_ground: true,
         })
     }
 }

@@ -34,7 +34,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use camera::rectify::{Rectification, Roi};
+use camera::rectify::{Rectification, Roi, Shear};
 use camera::{DsmGrid, RpcModel, UtmZone};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -189,6 +189,9 @@ struct SceneSettings {
     /// left view only.
     #[serde(default)]
     both_views: bool,
+    /// Absent from folders made before the right image was sheared to level the ground.
+    #[serde(default)]
+    level_ground: bool,
 }
 
 /// What a run of these options will do, known before any tile runs: the tiles, the DSM grid and
@@ -422,6 +425,11 @@ impl OpenPair {
             stem,
             single_tile,
             both_views: opts.both_views,
+            shear: if opts.level_ground {
+                Shear::Level
+            } else {
+                Shear::None
+            },
         }
     }
 }
@@ -472,6 +480,7 @@ fn scene_settings(
         matcher: opts.matcher.describe(),
         border: opts.border,
         both_views: opts.both_views,
+        level_ground: opts.level_ground,
     }
 }
 

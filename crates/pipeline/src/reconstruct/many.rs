@@ -486,6 +486,9 @@ fn pair_options(
     o.max_memory = opts.max_memory;
     o.shard = Shard::ALL;
     o.both_views = opts.both_views;
+    // The fusion is better from the pairs' unsheared frames (ten dev images: 0.841 m / 83.0 %
+    // within 1 m against 0.878 m / 82.5 % sheared).
+    o.level_ground = false;
     o
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use camera::rectify::{rectification, warp_nan, Rectification};
+use camera::rectify::{rectification_with, warp_nan, Rectification, Shear};
 use camera::{rasterize_window, triangulate_disparity, DsmGrid, GridWindow, Gridding, RpcModel};
 use raster::formats::{write_homographies, write_npy};
 use raster::{Homography, Image, Mask};
@@ -48,6 +48,8 @@ pub struct Scene<'a> {
     pub single_tile: bool,
     /// Whether very narrow baselines are measured from both views ([`super::both_views`]).
     pub both_views: bool,
+    /// Whether the right image is sheared to level the ground ([`Shear`]).
+    pub shear: Shear,
 }
 
 /// How a tile ended.
@@ -137,11 +139,12 @@ impl TileRecord {
 /// The local rectification of a tile, stretched along the rows on very narrow baselines for the
 /// classical matcher (see [`NARROW_PIXELS_PER_METRE`]).
 pub fn tile_rectification(scene: &Scene, tile: &Tile) -> Result<Rectification> {
-    let rect = rectification(
+    let rect = rectification_with(
         scene.rpc_left,
         scene.rpc_right,
         tile.extended,
         scene.alt_range,
+        scene.shear,
     )
     .with_context(|| format!("rectifying tile {} ({:?})", tile.id, tile.extended))?;
     let narrow = matches!(scene.matcher, Matcher::Classical(_))
