@@ -598,20 +598,24 @@ pub fn rectifying_homographies(
     let alts: Vec<f64> = ground.iter().map(GroundMatch::alt).collect();
     let n = alts.len() as f64;
     let alt_mean = alts.iter().sum::<f64>() / n;
-    let d = disparities(&hl, &hr, ground);
-    let d_mean = d.iter().sum::<f64>() / n;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (a, di) in alts.iter().zip(&d) {
-        sxy += (a - alt_mean) * (di - d_mean);
-        sxx += (a - alt_mean) * (a - alt_mean);
-    }
+    let sxx: f64 = alts.iter().map(|a| (a - alt_mean) * (a - alt_mean)).sum();
     if sxx.is_nan() || sxx <= 0.0 {
         return Err(RectifyError::Degenerate(
             "the camera matches are all at one altitude: the disparity direction is undetermined"
                 .into(),
         ));
     }
-    let slope = sxy / sxx;
+    let slope_of = |hl: &Homography, hr: &Homography| {
+        let d = disparities(hl, hr, ground);
+        let d_mean = d.iter().sum::<f64>() / n;
+        let sxy: f64 = alts
+            .iter()
+            .zip(&d)
+            .map(|(a, di)| (a - alt_mean) * (di - d_mean))
+            .sum();
+        sxy / sxx
+    };
+    let mut slope = slope_of(&hl, &hr);
     if !slope.is_finite() || slope == 0.0 {
         return Err(RectifyError::Degenerate(
             "disparity does not change with altitude: the two views have the same direction (no \
@@ -627,17 +631,8 @@ pub fn rectifying_homographies(
     }
     if shear == Shear::Level {
         hr = level_shear(&hl, &hr, ground).compose(&hr);
+        slope = slope_of(&hl, &hr);
     }
-    let slope = {
-        let d = disparities(&hl, &hr, ground);
-        let d_mean = d.iter().sum::<f64>() / n;
-        let sxy: f64 = alts
-            .iter()
-            .zip(&d)
-            .map(|(a, di)| (a - alt_mean) * (di - d_mean))
-            .sum();
-        sxy / sxx
-    };
 
     // Relative horizontal shift: the lowest disparity becomes LOWEST_DISPARITY.
     let d_low = disparities(&hl, &hr, ground)
