@@ -156,8 +156,8 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
                 **options: Any) -> dict:
     """From a raw pair to the DSM GeoTIFF ``out``, tile by tile, as ``seasonstereo
     reconstruct`` with the same options and defaults (underscores for dashes): ``like``,
-    ``truth``, ``resolution``, ``epsg``, ``gridding``, ``fill_holes``, ``median_filter``,
-    ``roi``, ``roi_lonlat``, ``alt_range``, ``tile``, ``collar``, ``max_memory`` (GiB),
+    ``truth``, ``resolution``, ``epsg``, ``gridding``, ``fill_holes``, ``fill_reach``,
+    ``median_filter``, ``roi``, ``roi_lonlat``, ``alt_range``, ``tile``, ``collar``, ``max_memory`` (GiB),
     ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates``, ``single_view``, ``threads`` (this call's
     worker threads; default every core) and the matcher's options of :func:`predict`. Returns the tiles (``failed`` ones included: the DSM holds the others),
     the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds`` and the

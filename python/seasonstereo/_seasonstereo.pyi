@@ -82,6 +82,7 @@ def reconstruct(
     epsg: Optional[int] = None,
     gridding: Optional[str] = None,
     fill_holes: Optional[int] = None,
+    fill_reach: Optional[int] = None,
     median_filter: Optional[int] = None,
     roi: Optional[Tuple[int, int, int, int]] = None,
     roi_lonlat: Optional[Tuple[float, float, float, float]] = None,

@@ -65,6 +65,9 @@ fn reconstruct_options(
     o.work_dir = k.path("work")?;
     o.truth = k.path("truth")?;
     k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
+    if let Some(cells) = k.take("fill_reach")? {
+        o.fill_reach = cells;
+    }
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
     o.both_views = !k.take("single_view")?.unwrap_or(false);
     shard_keywords(k, &mut o)?;

@@ -398,26 +398,48 @@ fn grid_cells(
     (heights, counts)
 }
 
+/// How far [`fill_holes`] goes from the measured cells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HoleFill {
+    /// Cells each of the 8 rays walks to find a height: a cell is enclosed when the two rays of
+    /// one line both find one, so holes up to twice this wide are filled across.
+    pub span: usize,
+    /// Cells at most between a filled cell and the nearest height its rays find: the interior
+    /// of a wider hole stays empty. Invented that far from any measurement, a height is a guess
+    /// (a courtyard at its roofs' height, a low roof at the ground's): on the 45 dev pairs those
+    /// cells were 10–20 m off on average (BENCHMARKS.md).
+    pub reach: usize,
+}
+
+impl HoleFill {
+    /// Rays of `span` cells, no limit of reach (a cell's nearest ray end is within `span`).
+    pub fn spanning(span: usize) -> Self {
+        HoleFill { span, reach: span }
+    }
+}
+
 /// Fills the holes of a DSM that are enclosed by data, ground-first: the usual holes of a
 /// stereo DSM are ground hidden behind buildings in one view and unmatched patches of weak
 /// texture, and a surface model with holes cannot be used for orthorectification, volumes or
 /// line-of-sight.
 ///
-/// For each empty cell, 8 rays (the axes and diagonals) walk at most `max_distance` cells to the
+/// For each empty cell, 8 rays (the axes and diagonals) walk at most `fill.span` cells to the
 /// first cell with a height. Along each of the 4 lines whose two rays both hit, the lower of the
 /// two heights is kept (an occluded strip lies between a roof and the ground, and belongs to the
 /// ground); the cell gets the median of those values. A cell without such an enclosing line
-/// (outside the images' footprint, or in a hole wider than `2 · max_distance`) stays empty.
-/// Returns the filled DSM and the number of cells filled.
-pub fn fill_holes(dsm: &Image, max_distance: usize) -> (Image, usize) {
+/// (outside the images' footprint, or in a hole wider than `2 · span`), or whose nearest hit is
+/// farther than `fill.reach` cells, stays empty. Returns the filled DSM and the number of cells
+/// filled.
+pub fn fill_holes(dsm: &Image, fill: HoleFill) -> (Image, usize) {
     let (w, h) = dsm.size();
     let src = dsm.channel(0);
     let data = src.data();
     // Opposite rays side by side: a cell between data on both sides of one line.
     const DIRS: [(i64, i64); 8] = raster::geometry::EIGHT_DIRECTIONS;
-    let ray = |x: usize, y: usize, (dx, dy): (i64, i64)| -> Option<f32> {
+    // The first height along a ray, and the steps to it.
+    let ray = |x: usize, y: usize, (dx, dy): (i64, i64)| -> Option<(f32, usize)> {
         let (mut cx, mut cy) = (x as i64, y as i64);
-        for _ in 0..max_distance {
+        for step in 1..=fill.span {
             cx += dx;
             cy += dy;
             if cx < 0 || cy < 0 || cx >= w as i64 || cy >= h as i64 {
@@ -425,7 +447,7 @@ pub fn fill_holes(dsm: &Image, max_distance: usize) -> (Image, usize) {
             }
             let v = data[cy as usize * w + cx as usize];
             if v.is_finite() {
-                return Some(v);
+                return Some((v, step));
             }
         }
         None
@@ -441,12 +463,17 @@ pub fn fill_holes(dsm: &Image, max_distance: usize) -> (Image, usize) {
                     continue;
                 }
                 lows.clear();
+                let mut nearest = usize::MAX;
                 for pair in DIRS.chunks_exact(2) {
-                    if let (Some(a), Some(b)) = (ray(x, y, pair[0]), ray(x, y, pair[1])) {
+                    let (a, b) = (ray(x, y, pair[0]), ray(x, y, pair[1]));
+                    for (_, steps) in a.iter().chain(&b) {
+                        nearest = nearest.min(*steps);
+                    }
+                    if let (Some((a, _)), Some((b, _))) = (a, b) {
                         lows.push(a.min(b));
                     }
                 }
-                if lows.is_empty() {
+                if lows.is_empty() || nearest > fill.reach {
                     continue;
                 }
                 lows.sort_unstable_by(f32::total_cmp);

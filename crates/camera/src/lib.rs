@@ -15,7 +15,7 @@ pub mod utm;
 
 pub use dsm::{
     dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window, read_dsm,
-    resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow, Gridding,
+    resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow, Gridding, HoleFill,
 };
 pub use error::CameraError;
 pub use rpc::RpcModel;

@@ -202,7 +202,7 @@ fn hole_filling_takes_the_ground_side_and_never_extrapolates() {
         dsm.set(11, y, 0, f32::NAN);
     }
     dsm.set(7, 3, 0, f32::NAN);
-    let (filled, n) = camera::fill_holes(&dsm, 20);
+    let (filled, n) = camera::fill_holes(&dsm, camera::HoleFill::spanning(20));
     assert_eq!(n, 3 * h + 1);
     for y in 0..h {
         for x in 3..6 {
@@ -212,9 +212,46 @@ fn hole_filling_takes_the_ground_side_and_never_extrapolates() {
     }
     assert_eq!(filled.get(7, 3, 0), 9.0, "hole inside the roof");
     // Too far to reach data: nothing is invented.
-    let (short, m) = camera::fill_holes(&dsm, 1);
+    let (short, m) = camera::fill_holes(&dsm, camera::HoleFill::spanning(1));
     assert_eq!(m, 1, "only the roof hole is enclosed within one cell");
     assert!(short.get(4, 3, 0).is_nan());
+}
+
+/// A courtyard 21 cells wide inside a roof: within `reach` of the roof its cells are filled,
+/// its middle, farther from every measurement, stays empty; a narrow strip is filled whole.
+#[test]
+fn fill_holes_leaves_the_interior_of_a_wide_hole_empty_beyond_its_reach() {
+    let (w, h) = (41, 41);
+    let mut dsm = Image::from_fn(w, h, |_, _| 12.0);
+    for y in 10..31 {
+        for x in 10..31 {
+            dsm.set(x, y, 0, f32::NAN);
+        }
+    }
+    for y in 0..h {
+        dsm.set(36, y, 0, f32::NAN);
+    }
+    let unlimited = camera::fill_holes(&dsm, camera::HoleFill::spanning(40)).0;
+    assert!(unlimited.data().iter().all(|v| v.is_finite()));
+    let fill = camera::HoleFill { span: 40, reach: 4 };
+    let (filled, n) = camera::fill_holes(&dsm, fill);
+    // The nearest roof cell along the 8 rays of (x, y) in the courtyard (columns and rows
+    // 10..31) is min(x − 9, 31 − x, y − 9, 31 − y) cells away.
+    let mut want = h;
+    for y in 10..31 {
+        for x in 10..31 {
+            let nearest = (x - 9).min(31 - x).min(y - 9).min(31 - y);
+            let v = filled.get(x, y, 0);
+            if nearest <= 4 {
+                assert_eq!(v, 12.0, "({x}, {y}) is {nearest} cells from the roof");
+                want += 1;
+            } else {
+                assert!(v.is_nan(), "({x}, {y}) is {nearest} cells from the roof");
+            }
+        }
+    }
+    assert_eq!(n, want, "the strip's {h} cells and the courtyard's rim");
+    assert!((0..h).all(|y| filled.get(36, y, 0) == 12.0));
 }
 
 #[test]

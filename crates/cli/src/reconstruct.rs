@@ -102,6 +102,12 @@ pub struct ReconstructArgs {
     /// protocol does.
     #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_CELLS)]
     fill_holes: usize,
+    /// Fill only the cells within this many cells of a measured height (along the filling's
+    /// rays): the middle of a wider hole stays empty, because a height invented that far from
+    /// any measurement is a guess (a courtyard at its roofs' height, a low roof at the ground's).
+    /// The `_filled.tif` sidecar marks the filled cells either way.
+    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_REACH)]
+    fill_reach: usize,
     /// Median filter of the DSM over this odd window of cells, after the filling: removes the
     /// roughness of single-pair matching on roofs and ground and keeps building edges (15 cells
     /// = 7.5 m at 0.5 m); 0 or 1 disables it.
@@ -181,6 +187,7 @@ impl ReconstructArgs {
             grid: self.grid.choice(),
             gridding: self.gridding.into(),
             fill_holes: flags::fill_cells(self.fill_holes),
+            fill_reach: self.fill_reach,
             median_filter: flags::median_cells(self.median_filter),
             border: 0,
             truth: self.truth,

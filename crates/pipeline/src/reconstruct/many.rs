@@ -564,7 +564,8 @@ fn write_fused(
         .with_context(|| format!("writing {}", spread_path.display()))?;
     drop(spread);
     let dsm = Image::new(w, h, 1, fused.heights)?;
-    let dsm = finish_dsm(dsm, opts.fill_holes, opts.median_filter)?;
+    let fill = opts.fill_holes.map(camera::HoleFill::spanning);
+    let dsm = finish_dsm(dsm, fill, opts.median_filter)?;
     write_dsm(&opts.output, &dsm, grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
     Ok(FusedOutcome {

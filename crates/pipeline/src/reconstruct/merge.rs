@@ -8,7 +8,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use anyhow::Result;
-use camera::{dsm_writer, DsmGrid, GridWindow, Gridding};
+use camera::{dsm_writer, DsmGrid, GridWindow, Gridding, HoleFill};
 use raster::formats::cog::COG_TILE;
 use raster::formats::CogWriter;
 use raster::Image;
@@ -19,7 +19,8 @@ use super::mosaic::Mosaic;
 use super::tile::{TileRecord, TileStatus};
 use super::{gib, ReconstructOptions};
 use crate::dsm::{
-    filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS,
+    filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS, DEFAULT_FILL_REACH,
+    DEFAULT_MEDIAN_CELLS,
 };
 
 /// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
@@ -31,17 +32,21 @@ pub const MERGE_BLOCK_ROWS: usize = COG_TILE;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Finishing {
     pub gridding: Gridding,
-    pub fill_holes: Option<usize>,
+    pub fill_holes: Option<HoleFill>,
     pub median_filter: Option<usize>,
 }
 
 impl Default for Finishing {
-    /// What a single pair's DSM gets by default: median gridding, filling up to
-    /// [`DEFAULT_FILL_CELLS`], a [`DEFAULT_MEDIAN_CELLS`] median.
+    /// What a single pair's DSM gets by default: median gridding, filling along rays of
+    /// [`DEFAULT_FILL_CELLS`] up to [`DEFAULT_FILL_REACH`] cells from the data, a
+    /// [`DEFAULT_MEDIAN_CELLS`] median.
     fn default() -> Self {
         Finishing {
             gridding: Gridding::Median,
-            fill_holes: Some(DEFAULT_FILL_CELLS),
+            fill_holes: Some(HoleFill {
+                span: DEFAULT_FILL_CELLS,
+                reach: DEFAULT_FILL_REACH,
+            }),
             median_filter: Some(DEFAULT_MEDIAN_CELLS),
         }
     }
@@ -51,16 +56,19 @@ impl Finishing {
     pub fn of(opts: &ReconstructOptions) -> Self {
         Finishing {
             gridding: opts.gridding,
-            fill_holes: opts.fill_holes,
+            fill_holes: opts.fill_holes.map(|span| HoleFill {
+                span,
+                reach: opts.fill_reach.min(span),
+            }),
             median_filter: opts.median_filter,
         }
     }
 
     /// Rows above and below a cell that its finished height depends on: the filling's rays walk
-    /// `fill_holes` cells (the diagonals as many rows), and the median reads `window / 2` rows
-    /// of filled cells.
+    /// `span` cells (the diagonals as many rows), and the median reads `window / 2` rows of
+    /// filled cells.
     pub fn halo(&self) -> usize {
-        let fill = self.fill_holes.unwrap_or(0);
+        let fill = self.fill_holes.map_or(0, |f| f.span);
         fill.saturating_add(self.median_filter.map_or(0, |w| w / 2))
     }
 }
@@ -255,14 +263,15 @@ mod tests {
         let made = fabricate_tiles(&work, (300, 530), 64).unwrap();
         let folder = TileFolder::new(&work);
         let finishings = [
+            Finishing::default(),
             Finishing {
                 gridding: Gridding::Median,
-                fill_holes: Some(DEFAULT_FILL_CELLS),
+                fill_holes: Some(HoleFill::spanning(DEFAULT_FILL_CELLS)),
                 median_filter: Some(DEFAULT_MEDIAN_CELLS),
             },
             Finishing {
                 gridding: Gridding::Max,
-                fill_holes: Some(3),
+                fill_holes: Some(HoleFill::spanning(3)),
                 median_filter: Some(5),
             },
             Finishing {
@@ -308,7 +317,10 @@ mod tests {
     fn the_halo_is_the_filling_and_median_reach_and_a_huge_grid_fits_in_little_memory() {
         let default = Finishing {
             gridding: Gridding::Median,
-            fill_holes: Some(40),
+            fill_holes: Some(HoleFill {
+                span: 40,
+                reach: 16,
+            }),
             median_filter: Some(7),
         };
         assert_eq!(default.halo(), 43);

@@ -8,7 +8,7 @@ use camera::Gridding;
 use dataset::shard::Shard;
 
 use super::merge::Finishing;
-use crate::dsm::GridChoice;
+use crate::dsm::{GridChoice, DEFAULT_FILL_REACH};
 use crate::matcher::Matcher;
 
 /// Tile side, left raw pixels: an affine rectification holds over about a kilometre.
@@ -40,8 +40,12 @@ pub struct ReconstructOptions {
     pub work_dir: Option<PathBuf>,
     pub grid: GridChoice,
     pub gridding: Gridding,
-    /// Hole filling distance in cells (see [`camera::fill_holes`]); `None`: no filling.
+    /// Hole filling distance in cells, the rays' length (see [`camera::fill_holes`]); `None`:
+    /// no filling.
     pub fill_holes: Option<usize>,
+    /// Cells at most between a filled cell and the nearest measured one
+    /// ([`camera::HoleFill::reach`]); capped at `fill_holes`.
+    pub fill_reach: usize,
     /// Median filter window of the DSM, cells (odd); `None`: none.
     pub median_filter: Option<usize>,
     /// Pixels of the rectified disparity ignored at each border.
@@ -102,7 +106,8 @@ impl ReconstructOptions {
             work_dir: None,
             grid,
             gridding: finishing.gridding,
-            fill_holes: finishing.fill_holes,
+            fill_holes: finishing.fill_holes.map(|f| f.span),
+            fill_reach: finishing.fill_holes.map_or(DEFAULT_FILL_REACH, |f| f.reach),
             median_filter: finishing.median_filter,
             border: 0,
             truth: None,

@@ -332,7 +332,7 @@ pub fn image_heights(
     let measured = rasterize(&points, &grid, Gridding::Median);
     let filled = finish_dsm(
         measured.clone(),
-        Some(DEFAULT_FILL_CELLS),
+        Some(camera::HoleFill::spanning(DEFAULT_FILL_CELLS)),
         Some(FUSED_MEDIAN_CELLS),
     )?;
     let ground = ground_level(&filled, RESOLUTION);
