@@ -224,6 +224,7 @@ mod tests {
     use super::super::fabricated::fabricate_tiles;
     use super::*;
     use crate::dsm::{DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+    use crate::reconstruct::ReconstructOptions;
 
     /// The merge as it was before blocks: the whole grid at once, written whole.
     fn merge_whole_grid(
@@ -311,6 +312,32 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The options' rays and reach become the finishing's, the reach never past the rays (a
+    /// cell's nearest ray end is within them anyway), and no filling stays none.
+    #[test]
+    fn the_options_fill_within_their_reach() {
+        let mut o = ReconstructOptions::new(
+            "l.tif".into(),
+            "r.tif".into(),
+            crate::matcher::Matcher::Classical(Default::default()),
+            crate::dsm::GridChoice::Like("t.tif".into()),
+            "o.tif".into(),
+        );
+        assert_eq!(Finishing::of(&o), Finishing::default());
+        let fill = |o: &ReconstructOptions| Finishing::of(o).fill_holes;
+        assert_eq!(
+            fill(&o),
+            Some(HoleFill {
+                span: DEFAULT_FILL_CELLS,
+                reach: DEFAULT_FILL_REACH
+            })
+        );
+        o.fill_reach = 1000;
+        assert_eq!(fill(&o), Some(HoleFill::spanning(DEFAULT_FILL_CELLS)));
+        o.fill_holes = None;
+        assert_eq!(fill(&o), None);
     }
 
     #[test]
