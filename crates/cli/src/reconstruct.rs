@@ -97,9 +97,9 @@ pub struct ReconstructArgs {
     /// benchmark's protocol (what `seasonstereo eval` does).
     #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
     gridding: GriddingArg,
-    /// Fill the DSM's holes enclosed by data within this many cells, ground first (the ground
-    /// hidden behind buildings, unmatched patches); 0 leaves them empty, as the benchmark's
-    /// protocol does.
+    /// Fill the DSM's holes enclosed by data within this many cells (on both sides of the cell
+    /// along a row, column or diagonal), ground first (the ground hidden behind buildings,
+    /// unmatched patches); 0 leaves them empty, as the benchmark's protocol does.
     #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_CELLS)]
     fill_holes: usize,
     /// Fill only the cells within this many cells of a measured height (along the filling's
