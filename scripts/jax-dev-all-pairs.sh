@@ -11,8 +11,11 @@
 #   scripts/jax-dev-all-pairs.sh [OUT] [-- extra reconstruct flags, e.g. --fill-holes 0]
 #
 # OUT (default out/jax-all) gets <pair>.tif, its log and score JSON, pairs.tsv and bins.md.
-# A pair whose score JSON exists is not run again (delete OUT, or use another, after changing
-# flags). SEASONSTEREO names the binary (default target/release/seasonstereo).
+# A pair whose <pair>.seconds exists is not reconstructed again, one whose score JSON exists not
+# scored again (delete OUT, or use another, after changing flags; delete OUT/*.score.json to
+# score again). SEASONSTEREO names the binary (default target/release/seasonstereo). S2P_EXTRA
+# names a folder of more s2p DSMs, <pair>.tif in this script's pair order (e.g. from
+# scripts/s2p_pair.py), compared like the data set's own where the set has none.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-out/jax-all}
@@ -32,15 +35,21 @@ for a in $IDS; do
     # s2p's order (its first image the reference) where it made the pair.
     [ -f "$D/s2p/truth-grid/$b-$a.tif" ] && { l=$b; r=$a; }
     p="$l-$r"
-    if [ ! -f "$OUT/$p.score.json" ]; then
+    if [ ! -f "$OUT/$p.seconds" ]; then
+      rm -rf "$OUT/$p.tif" "$OUT/${p}_filled.tif" "$OUT/${p}_work" "$OUT/$p.score.json"
       start=$(date +%s.%N)
       "$BIN" reconstruct "$D/images/JAX_068_${l}_RGB.tif" "$D/images/JAX_068_${r}_RGB.tif" \
         --rpc-left "$D/rpcs/ba/JAX_068_${l}_RGB.json" --rpc-right "$D/rpcs/ba/JAX_068_${r}_RGB.json" \
         --like "$T" -o "$OUT/$p.tif" "$@" > "$OUT/$p.log" 2>&1 \
         || { echo "$p failed:"; tail -3 "$OUT/$p.log"; exit 1; }
-      echo "$(date +%s.%N) - $start" | bc > "$OUT/$p.seconds"
+      echo "$(date +%s.%N) - $start" | bc > "$OUT/$p.seconds.tmp"
+      mv "$OUT/$p.seconds.tmp" "$OUT/$p.seconds"
+    fi
+    if [ ! -f "$OUT/$p.score.json" ]; then
       against=()
-      [ -f "$D/s2p/truth-grid/$p.tif" ] && against=(--against "$D/s2p/truth-grid/$p.tif")
+      for s2p in "$D/s2p/truth-grid/$p.tif" ${S2P_EXTRA:+"$S2P_EXTRA/$p.tif"}; do
+        [ -f "$s2p" ] && { against=(--against "$s2p"); break; }
+      done
       "$BIN" score "$OUT/$p.tif" "${against[@]}" --truth "$T" --json "$OUT/$p.score.json.tmp" \
         >> "$OUT/$p.log"
       mv "$OUT/$p.score.json.tmp" "$OUT/$p.score.json"
