@@ -39,10 +39,11 @@ def write_flat_dem(path, lon, lat):
     res, size = 0.001, 1000
     west, north = round(lon) - 0.5, round(lat) + 0.5
     data = np.full((size, size), FLAT_DEM_ALTITUDE, np.float32)
-    with rasterio.open(path, "w", driver="GTiff", width=size, height=size, count=1,
+    with rasterio.open(path + ".tmp", "w", driver="GTiff", width=size, height=size, count=1,
                        dtype="float32", crs="EPSG:4326",
                        transform=from_origin(west, north, res, res)) as dst:
         dst.write(data, 1)
+    os.replace(path + ".tmp", path)
 
 
 def image_paths(data, image_id):
@@ -81,10 +82,11 @@ def run_pair(args, pair, dem):
     dsm = os.path.join(work, "dsm.tif")
     if rc != 0 or not os.path.exists(dsm):
         sys.exit(f"{pair}: s2p failed (exit {rc}); see {args.out}/{pair}.log")
-    shutil.copyfile(dsm, out_tif + ".tmp")
-    os.replace(out_tif + ".tmp", out_tif)
+    # The DSM lands last: a pair whose DSM exists is complete, its time included.
     with open(os.path.join(args.out, f"{pair}.seconds"), "w") as f:
         f.write(f"{seconds:.1f}\n")
+    shutil.copyfile(dsm, out_tif + ".tmp")
+    os.replace(out_tif + ".tmp", out_tif)
     print(f"{pair}: {out_tif} in {seconds:.1f} s")
 
 
