@@ -182,9 +182,10 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
     """Many dates, one DSM, as ``seasonstereo reconstruct-many``: scores every overlapping pair
     of ``images`` (two or more; cameras ``<image stem>.json`` in ``rpc_dir``, else the images'
     RPC tags), reconstructs the best ``pairs`` and fuses them into ``out`` (with
-    ``<out>_count.tif``, ``<out>_spread.tif`` and ``<out>_report.json`` beside it). Options, with
-    the command's defaults: ``pairs``, ``dry_run`` (choose the pairs, write nothing),
-    ``cluster_tolerance``, ``min_support``, ``register``, ``pair_weights``, ``fill_holes``,
+    ``<out>_count.tif``, ``<out>_spread.tif``, ``<out>_confidence.tif`` and
+    ``<out>_report.json`` beside it). Options, with the command's defaults: ``pairs``,
+    ``dry_run`` (choose the pairs, write nothing), ``cluster_tolerance``, ``min_support``,
+    ``min_confidence``, ``register``, ``pair_weights``, ``fill_holes``,
     ``median_filter``, ``pair_median_filter``, ``single_view``, ``work``, ``like``, ``resolution``, ``epsg``,
     ``truth``,
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this

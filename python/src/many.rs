@@ -64,6 +64,7 @@ fn many_options(
     o.dry_run = k.take("dry_run")?.unwrap_or(false);
     o.cluster_tolerance = k.take("cluster_tolerance")?.unwrap_or(o.cluster_tolerance);
     o.min_support = k.take("min_support")?;
+    o.min_confidence = k.take("min_confidence")?;
     o.co_register = k.take("register")?.unwrap_or(false);
     o.weight_pairs = k.take("pair_weights")?.unwrap_or(false);
     k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;

@@ -295,18 +295,29 @@ pub enum Gridding {
 /// The flat cell index and altitude of every point that falls on `grid` (projections in
 /// parallel).
 fn cells_of(points: &Points, grid: &DsmGrid) -> Vec<(usize, f32)> {
+    cells_with(points, grid, |_, alt| alt as f32)
+}
+
+/// The flat cell index of every point that falls on `grid`, with `value(point index, altitude)`
+/// (projections in parallel).
+fn cells_with<T: Send>(
+    points: &Points,
+    grid: &DsmGrid,
+    value: impl Fn(usize, f64) -> T + Sync,
+) -> Vec<(usize, T)> {
     let zone = grid.zone();
     points
         .lonlatalt
         .par_iter()
+        .enumerate()
         .with_min_len(4096)
-        .filter_map(|&[lon, lat, alt]| {
+        .filter_map(|(i, &[lon, lat, alt])| {
             if !(lon.is_finite() && lat.is_finite() && alt.is_finite()) {
                 return None;
             }
             let (e, n) = zone.forward(lon, lat);
             grid.cell_of(e, n)
-                .map(|(c, r)| (r * grid.width + c, alt as f32))
+                .map(|(c, r)| (r * grid.width + c, value(i, alt)))
         })
         .collect()
 }
@@ -337,13 +348,47 @@ pub struct GridWindow {
     pub heights: Vec<f32>,
     /// Number of points in each cell (saturating), what merges of overlapping windows weigh.
     pub counts: Vec<u16>,
+    /// The matcher's confidence of each cell ([`rasterize_window_with`]), NaN where none; `None`
+    /// when the matcher gives none.
+    pub confidence: Option<Vec<f32>>,
 }
 
 /// Like [`rasterize`], on the smallest window of `grid` holding every point, with the number of
 /// points per cell: a tile of a whole scene fills a few thousand cells of a grid of hundreds of
 /// millions. `None` when no point falls on the grid.
 pub fn rasterize_window(points: &Points, grid: &DsmGrid, gridding: Gridding) -> Option<GridWindow> {
-    let cells = cells_of(points, grid);
+    window_of(cells_of(points, grid), None, grid, gridding)
+}
+
+/// [`rasterize_window`] with a per-point attribute (`values`, one per point of `points`,
+/// row-major like them; the matcher's confidence) gridded on the same cells, from the same
+/// projections: the median (upper middle) of the finite values of the points falling in each
+/// cell, NaN where none.
+pub fn rasterize_window_with(
+    points: &Points,
+    values: &[f32],
+    grid: &DsmGrid,
+    gridding: Gridding,
+) -> Option<GridWindow> {
+    assert_eq!(values.len(), points.lonlatalt.len(), "one value per point");
+    let both = cells_with(points, grid, |i, alt| (alt as f32, values[i]));
+    let cells = both.iter().map(|&(i, (alt, _))| (i, alt)).collect();
+    let attribute = both
+        .into_iter()
+        .filter(|(_, (_, v))| v.is_finite())
+        .map(|(i, (_, v))| (i, v))
+        .collect();
+    window_of(cells, Some(attribute), grid, gridding)
+}
+
+/// The window of `grid` holding `cells` (flat index, altitude), gridded, and the `attribute`'s
+/// median per cell when given.
+fn window_of(
+    cells: Vec<(usize, f32)>,
+    attribute: Option<Vec<(usize, f32)>>,
+    grid: &DsmGrid,
+    gridding: Gridding,
+) -> Option<GridWindow> {
     let (mut c0, mut r0, mut c1, mut r1) = (usize::MAX, usize::MAX, 0, 0);
     for &(i, _) in &cells {
         let (c, r) = (i % grid.width, i / grid.width);
@@ -355,6 +400,7 @@ pub fn rasterize_window(points: &Points, grid: &DsmGrid, gridding: Gridding) -> 
     let (width, height) = (c1 - c0 + 1, r1 - r0 + 1);
     let local = |i: usize| (i / grid.width - r0) * width + (i % grid.width - c0);
     let (heights, counts) = grid_cells(cells, width * height, local, gridding);
+    let confidence = attribute.map(|a| grid_cells(a, width * height, local, Gridding::Median).0);
     Some(GridWindow {
         col: c0,
         row: r0,
@@ -362,6 +408,7 @@ pub fn rasterize_window(points: &Points, grid: &DsmGrid, gridding: Gridding) -> 
         height,
         heights,
         counts,
+        confidence,
     })
 }
 

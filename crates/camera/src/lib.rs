@@ -14,8 +14,9 @@ pub mod triangulate;
 pub mod utm;
 
 pub use dsm::{
-    dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window, read_dsm,
-    resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow, Gridding, HoleFill,
+    dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window,
+    rasterize_window_with, read_dsm, resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow,
+    Gridding, HoleFill,
 };
 pub use error::CameraError;
 pub use rpc::RpcModel;

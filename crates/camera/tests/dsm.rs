@@ -183,6 +183,30 @@ fn median_gridding_ignores_an_isolated_high_point() {
     assert_eq!(med.data().iter().filter(|v| v.is_finite()).count(), 2);
     let bits = |i: &Image| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&max), bits(&rasterize_max(&points, &grid)));
+
+    // A per-point attribute (the matcher's confidence) lands in the heights' cells: the window
+    // is the heights' (cells (1, 0) to (3, 1)), the values' median per cell, NaN values ignored.
+    let plain = camera::rasterize_window(&points, &grid, camera::Gridding::Median).unwrap();
+    let conf = [0.9, 0.1, 0.5, f32::NAN, 0.7];
+    let with =
+        camera::rasterize_window_with(&points, &conf, &grid, camera::Gridding::Median).unwrap();
+    assert_eq!(plain.confidence, None);
+    assert_eq!(
+        (with.col, with.row, with.width, with.height),
+        (plain.col, plain.row, plain.width, plain.height)
+    );
+    assert_eq!((with.col, with.row, with.width, with.height), (1, 0, 3, 2));
+    assert_eq!(
+        bits(&Image::new(3, 2, 1, with.heights.clone()).unwrap()),
+        bits(&Image::new(3, 2, 1, plain.heights).unwrap())
+    );
+    let c = with.confidence.unwrap();
+    assert_eq!(c[3], 0.5, "cell (1, 1): the median of 0.9, 0.1, 0.5");
+    assert!(
+        c[2].is_nan(),
+        "cell (3, 0): its only point has a NaN confidence"
+    );
+    assert_eq!(c.iter().filter(|v| v.is_finite()).count(), 1);
 }
 
 #[test]

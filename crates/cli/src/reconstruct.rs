@@ -38,7 +38,10 @@ pub struct ReconstructArgs {
     /// Right raw image, idem with --rpc-right.
     right: PathBuf,
     /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell). Beside it `<stem>_filled.tif`,
-    /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height.
+    /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height; and,
+    /// with the classical matcher, `<stem>_confidence.tif`: each measured cell's matching
+    /// confidence, 1 − S1/S2 (the winner's aggregated cost against its best rival more than a
+    /// pixel away), 0 to 1, NaN elsewhere.
     #[arg(short, long)]
     output: PathBuf,
     /// Left camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another

@@ -57,7 +57,12 @@ fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
     let o = seasonstereo(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
-    for f in ["fused.tif", "fused_count.tif", "fused_spread.tif"] {
+    for f in [
+        "fused.tif",
+        "fused_count.tif",
+        "fused_spread.tif",
+        "fused_confidence.tif",
+    ] {
         assert!(dir.path().join(f).is_file(), "{f}\n{stdout}");
     }
     let report: serde_json::Value = serde_json::from_str(
@@ -93,6 +98,27 @@ fn four_dates_fuse_into_one_dsm_on_the_truth_grid() {
     let count = raster::read_image(dir.path().join("fused_count.tif")).unwrap();
     let max = count.data().iter().copied().fold(0.0f32, f32::max);
     assert_eq!(max, 3.0);
+    // Each pair left its matcher's confidence beside its DSM, and the fusion kept the cells
+    // whose agreeing pairs' confidences sum to the default 0.1 a pair, and only those.
+    for p in pairs {
+        let stem = p["stem"].as_str().unwrap();
+        let c = dir
+            .path()
+            .join(format!("fused_work/pairs/{stem}_confidence.tif"));
+        assert!(c.is_file(), "{}", c.display());
+    }
+    let least = report["fusion"]["min_confidence"].as_f64().unwrap() as f32;
+    assert!((least - 0.3).abs() < 1e-6, "{least}");
+    assert_eq!(report["fusion"]["min_support"].as_u64(), Some(1));
+    let confidence = raster::read_image(dir.path().join("fused_confidence.tif")).unwrap();
+    let kept: Vec<f32> = confidence
+        .data()
+        .iter()
+        .copied()
+        .filter(|c| c.is_finite())
+        .collect();
+    assert!(kept.len() > 100_000, "{}", kept.len());
+    assert!(kept.iter().all(|&c| (least..=3.0).contains(&c)));
     assert!(stdout.contains("vs truth: MAE filtered"), "{stdout}");
     // A rerun resumes: every pair's tiles are finished, none is recomputed.
     let record = dir.path().join("fused_work/pairs").join(format!(

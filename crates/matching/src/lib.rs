@@ -55,7 +55,7 @@ pub use error::MatchError;
 pub use parallax::{vertical_parallax, Parallax};
 pub use range::estimate_range;
 pub use sgm::{
-    disparity_count, match_pair, match_pair_with_progress, memory_bytes, Aggregation,
-    DisparityRange, Paths, SgmParams,
+    disparity_count, match_pair, match_pair_with_confidence, match_pair_with_progress,
+    memory_bytes, Aggregation, DisparityRange, Paths, SgmParams,
 };
 pub use speckle::{remove_speckles, Speckle};

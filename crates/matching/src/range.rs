@@ -35,7 +35,7 @@ pub fn estimate_range(left: &Image, right: &Image) -> Result<(i32, i32), MatchEr
         uniqueness: Some(0.1),
         ..SgmParams::default()
     };
-    let disp = match_grey(&lg, &rg, (cw, ch), (-r, r), &params, None)?;
+    let (disp, _) = match_grey(&lg, &rg, (cw, ch), (-r, r), &params, None)?;
     let mut valid: Vec<f32> = disp.into_iter().filter(|v| v.is_finite()).collect();
     if valid.len() < (cw * ch / 100).max(16) {
         return Err(MatchError::RangeEstimation(format!(

@@ -23,7 +23,8 @@ pub(crate) struct Selection {
     pub subpixel: Subpixel,
 }
 
-/// Left-view disparities (`height · width`, NaN where invalid) from `sum`.
+/// Left-view disparities (`height · width`, NaN where invalid) from `sum`, and the confidence
+/// of each ([`confidence`], NaN where the disparity is).
 pub(crate) fn select(
     sum: &[u16],
     dims: Dims,
@@ -31,36 +32,48 @@ pub(crate) fn select(
     right_valid: &[bool],
     sel: &Selection,
     tick: &(dyn Fn() + Sync),
-) -> Vec<f32> {
+) -> (Vec<f32>, Vec<f32>) {
     let (w, h, n) = dims.sizes();
     let mut out = vec![f32::NAN; w * h];
+    let mut conf = vec![f32::NAN; w * h];
     if w == 0 || n == 0 {
-        return out;
+        return (out, conf);
     }
     #[cfg(target_arch = "x86_64")]
     let avx2 = is_x86_feature_detected!("avx2");
     out.par_chunks_mut(w)
+        .zip(conf.par_chunks_mut(w))
         .zip(sum.par_chunks(w * n))
         .enumerate()
         .for_each_init(
             || (vec![0usize; w], vec![u32::MAX; w]),
-            |(best_k, best_r), (y, (orow, srow))| {
+            |(best_k, best_r), (y, ((orow, crow), srow))| {
                 let valid = (
                     &left_valid[y * w..(y + 1) * w],
                     &right_valid[y * w..(y + 1) * w],
                 );
+                let row = Row {
+                    disparity: orow,
+                    confidence: crow,
+                };
                 #[cfg(target_arch = "x86_64")]
                 if avx2 {
                     // SAFETY: AVX2 support was checked at run time.
-                    unsafe { select_row_avx2(srow, n, valid, sel, orow, best_k, best_r) };
+                    unsafe { select_row_avx2(srow, n, valid, sel, row, best_k, best_r) };
                     tick();
                     return;
                 }
-                select_row(srow, n, valid, sel, orow, best_k, best_r);
+                select_row(srow, n, valid, sel, row, best_k, best_r);
                 tick();
             },
         );
-    out
+    (out, conf)
+}
+
+/// One output row of [`select`].
+struct Row<'a> {
+    disparity: &'a mut [f32],
+    confidence: &'a mut [f32],
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -70,11 +83,11 @@ unsafe fn select_row_avx2(
     n: usize,
     valid: (&[bool], &[bool]),
     sel: &Selection,
-    orow: &mut [f32],
+    row: Row,
     best_k: &mut [usize],
     best_r: &mut [u32],
 ) {
-    select_row(srow, n, valid, sel, orow, best_k, best_r)
+    select_row(srow, n, valid, sel, row, best_k, best_r)
 }
 
 /// Marks a pixel without a selected disparity in `best_k`.
@@ -87,10 +100,14 @@ fn select_row(
     n: usize,
     (lvalid, rvalid): (&[bool], &[bool]),
     sel: &Selection,
-    orow: &mut [f32],
+    row: Row,
     best_k: &mut [usize],
     best_r: &mut [u32],
 ) {
+    let Row {
+        disparity: orow,
+        confidence: crow,
+    } = row;
     let w = orow.len();
     best_r.fill(u32::MAX);
     for (x, sx) in srow.chunks_exact(n).enumerate() {
@@ -99,6 +116,7 @@ fn select_row(
         }
         best_k[x] = NONE;
         orow[x] = f32::NAN;
+        crow[x] = f32::NAN;
         if !lvalid[x] {
             continue;
         }
@@ -108,7 +126,8 @@ fn select_row(
         if xr < 0 || xr >= w as i64 || !rvalid[xr as usize] {
             continue;
         }
-        if sel.uniqueness.is_some_and(|u| is_ambiguous(sx, m, k, u)) {
+        let second = second_best(sx, k);
+        if sel.uniqueness.is_some_and(|u| is_ambiguous(m, second, u)) {
             continue;
         }
         let mut d = (sel.d_min as i64 + k as i64) as f32;
@@ -117,10 +136,16 @@ fn select_row(
             d += subpixel_offset(sel.subpixel, cm, c0, cp);
         }
         orow[x] = d;
+        crow[x] = confidence(m, second);
         best_k[x] = k;
     }
     if let Some(tol) = sel.lr_tolerance {
         check_left_right(orow, best_k, best_r, sel.d_min, tol);
+        for (c, d) in crow.iter_mut().zip(orow.iter()) {
+            if d.is_nan() {
+                *c = f32::NAN;
+            }
+        }
     }
 }
 
@@ -162,14 +187,34 @@ fn winner(sx: &[u16]) -> (u16, usize) {
     ((packed >> 16) as u16, (packed & 0xFFFF) as usize)
 }
 
-/// Whether the winner `m` at `k` fails the uniqueness test of ratio `u`: it is not below
-/// `(1 − u)` times the best cost more than one disparity away.
+/// The best cost of `sx` more than one disparity away from the winner at `k`, `None` when the
+/// range has no such disparity.
 #[inline(always)]
-fn is_ambiguous(sx: &[u16], m: u16, k: usize, u: f32) -> bool {
+fn second_best(sx: &[u16], k: usize) -> Option<u16> {
     let left = sx[..k.saturating_sub(1)].iter().copied().min();
     let right = sx.get(k + 2..).and_then(|s| s.iter().copied().min());
-    let second = left.into_iter().chain(right).min();
+    left.into_iter().chain(right).min()
+}
+
+/// Whether the winner's cost `m` fails the uniqueness test of ratio `u`: it is not below
+/// `(1 − u)` times its rival `second`.
+#[inline(always)]
+fn is_ambiguous(m: u16, second: Option<u16>, u: f32) -> bool {
     second.is_some_and(|second| f32::from(m) >= (1.0 - u) * f32::from(second))
+}
+
+/// How clearly the winner's cost `m` beats the best cost `second` more than one disparity away:
+/// `1 − m / second` (the peak ratio of Hu & Mordohai, 2012, in `[0, 1]`), 1 without a rival
+/// and 0 when both are zero. A winner that passes the uniqueness test of ratio `u` has a
+/// confidence above `u`. Low at occlusions, in repetitive or weak texture and along the
+/// disparity edges the aggregation smoothed: what a fusion of several pairs should trust less.
+#[inline(always)]
+fn confidence(m: u16, second: Option<u16>) -> f32 {
+    match second {
+        None => 1.0,
+        Some(0) => 0.0,
+        Some(s) => (1.0 - f32::from(m) / f32::from(s)).max(0.0),
+    }
 }
 
 /// Sub-pixel offset of the winner from its cost `c0` and its neighbours' `cm`, `cp`.
@@ -338,6 +383,7 @@ mod tests {
                 },
                 &|| {},
             )
+            .0
         };
         let p = run(Subpixel::Parabola, None);
         assert!((p[2] - (1.0 + 20.0 / 80.0)).abs() < 1e-6, "{}", p[2]);
@@ -352,5 +398,51 @@ mod tests {
         assert_eq!(l[1], 0.0);
         let l = run(Subpixel::None, Some(1.0));
         assert_eq!(l[2], 1.0);
+    }
+
+    #[test]
+    fn confidence_is_the_winners_margin_over_its_rival_and_follows_the_disparity() {
+        // One row, 3 pixels, 6 disparities: a clear winner, an ambiguous one, a flat one.
+        let n = 6;
+        let s: Vec<u16> = [
+            [90, 80, 20, 70, 80, 90],   // rival 80 (k = 4 or 0): 1 − 20/80
+            [50, 40, 100, 100, 42, 60], // winner k = 1 (40), rival 42 at k = 4
+            [40, 40, 30, 30, 30, 30],   // a tie with a far disparity: no confidence
+        ]
+        .concat();
+        let dims = Dims {
+            width: 3,
+            height: 1,
+            n_disp: n,
+        };
+        let valid = vec![true; 3];
+        let run = |uniqueness| {
+            select(
+                &s,
+                dims,
+                &valid,
+                &valid,
+                &Selection {
+                    d_min: -2,
+                    lr_tolerance: None,
+                    uniqueness,
+                    subpixel: Subpixel::None,
+                },
+                &|| {},
+            )
+        };
+        let (d, c) = run(None);
+        assert_eq!(d[0], 0.0);
+        assert!((c[0] - 0.75).abs() < 1e-6, "{}", c[0]);
+        assert!((c[1] - (1.0 - 40.0 / 42.0)).abs() < 1e-6, "{}", c[1]);
+        assert_eq!(c[2], 0.0);
+        // The uniqueness test drops exactly the winners whose confidence is at most its ratio,
+        // and their confidence with them.
+        let (d, c) = run(Some(0.1));
+        assert!(d[0].is_finite() && c[0] > 0.1);
+        assert!(d[1].is_nan() && c[1].is_nan());
+        assert!(d[2].is_nan() && c[2].is_nan());
+        assert_eq!(confidence(5, None), 1.0);
+        assert_eq!(confidence(0, Some(0)), 0.0);
     }
 }

@@ -259,11 +259,29 @@ pub fn match_pair_with_progress(
     params: &SgmParams,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Image, MatchError> {
+    Ok(match_pair_with_confidence(left, right, range, params, progress)?.0)
+}
+
+/// [`match_pair_with_progress`] and the confidence of each disparity: `1 − S₁ / S₂`, the margin
+/// of the winner's aggregated cost `S₁` over the best cost `S₂` more than one disparity away
+/// (in `[0, 1]`; NaN where the disparity is NaN; after the median, the confidence of the
+/// pixel's own winner). Low at occlusions, in weak or repetitive texture and where the
+/// aggregation smoothed a disparity edge.
+pub fn match_pair_with_confidence(
+    left: &Image,
+    right: &Image,
+    range: DisparityRange,
+    params: &SgmParams,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<(Image, Image), MatchError> {
     let (w, h) = check_pair(left, right)?;
     let lg = left.to_gray();
     let rg = right.to_gray();
-    let disp = match_grey(lg.data(), rg.data(), (w, h), range, params, progress)?;
-    Ok(Image::new(w, h, 1, disp).expect("sizes match"))
+    let (disp, conf) = match_grey(lg.data(), rg.data(), (w, h), range, params, progress)?;
+    Ok((
+        Image::new(w, h, 1, disp).expect("sizes match"),
+        Image::new(w, h, 1, conf).expect("sizes match"),
+    ))
 }
 
 /// The common size of a pair, or the error saying why it cannot be matched.
@@ -281,7 +299,8 @@ pub(crate) fn check_pair(left: &Image, right: &Image) -> Result<(usize, usize), 
     Ok((w, h))
 }
 
-/// The whole pipeline on grey, row-major buffers of `w × h`.
+/// The whole pipeline on grey, row-major buffers of `w × h`: the disparities and their
+/// confidences.
 pub(crate) fn match_grey(
     lg: &[f32],
     rg: &[f32],
@@ -289,7 +308,7 @@ pub(crate) fn match_grey(
     range: DisparityRange,
     params: &SgmParams,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
-) -> Result<Vec<f32>, MatchError> {
+) -> Result<(Vec<f32>, Vec<f32>), MatchError> {
     let n = params.validate(range)?;
     let (mut cost, mut sum) = allocate_volumes(w, h, n, params)?;
     let steps = 4 * h + if params.median { h } else { 0 };
@@ -311,7 +330,7 @@ pub(crate) fn match_grey(
     aggregate_costs(&cost, &mut sum, dims, &pen, params, &tick);
     drop(cost);
 
-    let mut disp = select(
+    let (mut disp, mut conf) = select(
         &sum,
         dims,
         &left_valid,
@@ -330,7 +349,12 @@ pub(crate) fn match_grey(
         remove_speckles(&mut disp, w, h, sp);
     }
     clear_off_image(&mut disp, w, &right_valid);
-    Ok(disp)
+    for (c, d) in conf.iter_mut().zip(&disp) {
+        if d.is_nan() {
+            *c = f32::NAN;
+        }
+    }
+    Ok((disp, conf))
 }
 
 /// Both volumes (census costs and aggregated costs) up front, so that an impossible request fails

@@ -222,6 +222,21 @@ pub fn filled_path(dsm: &Path) -> PathBuf {
     ))
 }
 
+/// Suffix of `reconstruct`'s confidence sidecar, beside the DSM (`<stem>_confidence.tif`).
+pub const CONFIDENCE_SUFFIX: &str = "_confidence.tif";
+
+/// The confidence sidecar of `dsm`: `<stem>_confidence.tif` in the DSM's folder. It holds the
+/// classical matcher's confidence of each measured cell (`1 − S₁/S₂`, the winner's margin over
+/// its best rival, in `[0, 1]`; NaN on filled and empty cells), what `reconstruct-many` weighs
+/// the pairs' heights by.
+pub fn confidence_path(dsm: &Path) -> PathBuf {
+    let stem = dsm.file_stem().map(|s| s.to_string_lossy().into_owned());
+    dsm.with_file_name(format!(
+        "{}{CONFIDENCE_SUFFIX}",
+        stem.as_deref().unwrap_or("dsm")
+    ))
+}
+
 /// Which cells of a finished DSM were measured and which invented, so that users and the fusion of
 /// several pairs need not trust filled heights as much as triangulated ones: 0 where `measured`
 /// had a height before post-processing, 1 where only `finished` has one (hole filling), NaN where

@@ -64,10 +64,13 @@ pub enum Matcher {
     Network(Network),
 }
 
-/// A disparity and the range it was searched over (`None` for the network).
+/// A disparity, the range it was searched over (`None` for the network) and the confidence of
+/// each disparity ([`matching::match_pair_with_confidence`]; `None` for the network, which has
+/// no cost volume to read it from).
 pub struct Matched {
     pub disparity: Image,
     pub range: Option<DisparityRange>,
+    pub confidence: Option<Image>,
 }
 
 /// At and above this disparity per metre of altitude the classical matcher uses its `P2` as
@@ -208,6 +211,12 @@ impl Matcher {
         !matches!(self, Matcher::Classical(_))
     }
 
+    /// Whether [`Matcher::disparity`] gives a confidence with the disparity (the classical
+    /// matcher reads it from its cost volume; the network has none).
+    pub fn gives_confidence(&self) -> bool {
+        matches!(self, Matcher::Classical(_))
+    }
+
     /// The disparity of the rectified pair `left`, `right` (NaN = invalid). The classical
     /// matcher searches the range `range` gives; the network ignores it.
     pub fn disparity(
@@ -221,18 +230,20 @@ impl Matcher {
             Matcher::Classical(params) => {
                 let range = range.resolve(left, right)?;
                 let total = 5 * left.height();
-                let disparity = track(progress, self.label(), total, |cb| {
-                    matching::match_pair_with_progress(left, right, range, params, Some(cb))
+                let (disparity, confidence) = track(progress, self.label(), total, |cb| {
+                    matching::match_pair_with_confidence(left, right, range, params, Some(cb))
                 })?;
                 Ok(Matched {
                     disparity,
                     range: Some(range),
+                    confidence: Some(confidence),
                 })
             }
             #[cfg(feature = "network")]
             Matcher::Network(n) => Ok(Matched {
                 disparity: n.predict(left, right, progress)?,
                 range: None,
+                confidence: None,
             }),
         }
     }

@@ -50,6 +50,43 @@ fn options(root: &Path, out: &Path, tile: usize) -> ReconstructOptions {
     }
 }
 
+/// The confidence sidecar covers exactly the measured cells, in `[0, 1]`, and says which are
+/// right: the most confident half of the cells errs less than the least confident half.
+fn confident_cells_are_the_accurate_ones(
+    path: &Path,
+    dsm: &raster::Image,
+    truth: &raster::Image,
+    s: &ReconstructSummary,
+) {
+    let confidence = read_dsm(pipeline::dsm::confidence_path(path), None)
+        .unwrap()
+        .image;
+    let sc = s.scores.as_ref().unwrap();
+    let (w, h) = dsm.size();
+    let mut cells = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (z, c) = (dsm.get(x, y, 0), confidence.get(x, y, 0));
+            assert_eq!(z.is_finite(), c.is_finite(), "cell {x},{y}: unfilled DSM");
+            let (tx, ty) = (x as i64 + sc.dx as i64, y as i64 + sc.dy as i64);
+            if !c.is_finite() || tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 {
+                continue;
+            }
+            assert!((0.0..=1.0).contains(&c), "{c}");
+            let g = truth.get(tx as usize, ty as usize, 0);
+            if g.is_finite() {
+                cells.push((c, (z as f64 + sc.offset.unwrap() - g as f64).abs()));
+            }
+        }
+    }
+    cells.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let half = cells.len() / 2;
+    let mean = |v: &[(f32, f64)]| v.iter().map(|c| c.1).sum::<f64>() / v.len() as f64;
+    let (low, high) = (mean(&cells[..half]), mean(&cells[half..]));
+    eprintln!("MAE of the least confident half {low:.3} m, of the most confident {high:.3} m");
+    assert!(cells.len() > 10_000 && high < 0.8 * low, "{high} vs {low}");
+}
+
 fn mae(s: &ReconstructSummary) -> f64 {
     s.scores.as_ref().unwrap().mae_filtered.unwrap()
 }
@@ -90,6 +127,7 @@ fn tiles_give_the_single_tile_dsm_away_from_their_edges_without_seams() {
         100.0 * same
     );
     assert!(same > 0.8 && median <= 0.01, "{same} {median}");
+    confident_cells_are_the_accurate_ones(&dir.path().join("one.tif"), &u, &truth, &one);
     // No seam: along the tiles' inner edges the tiled DSM errs no more than the untiled one in
     // the same cells (each aligned to the truth as its scores found).
     let cores: Vec<_> = tiled.records.iter().map(|r| r.tile.core).collect();

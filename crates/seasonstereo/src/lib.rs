@@ -65,8 +65,8 @@ pub use pipeline::matcher::{Matched, Matcher, RangeSource};
 pub use pipeline::outputs::Incomplete;
 pub use pipeline::reconstruct::fuse::{Agreement, FusionParams};
 pub use pipeline::reconstruct::many::{
-    auto_min_support, FusedOutcome, PairOutcome, PairStatus, ReconstructManyOptions,
-    ReconstructManySummary, DEFAULT_PAIRS,
+    auto_min_confidence, auto_min_support, FusedOutcome, PairOutcome, PairStatus,
+    ReconstructManyOptions, ReconstructManySummary, DEFAULT_PAIRS, MIN_CONFIDENCE_PER_PAIR,
 };
 pub use pipeline::reconstruct::select::{PairChoice, PairTerms, View};
 pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};

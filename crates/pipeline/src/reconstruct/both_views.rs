@@ -8,7 +8,7 @@
 //! often a mismatch than the ground-first fill is wrong (BENCHMARKS.md).
 
 use anyhow::{Context, Result};
-use camera::{rasterize_window, triangulate_disparity, GridWindow, Points};
+use camera::{rasterize_window, rasterize_window_with, triangulate_disparity, GridWindow, Points};
 use raster::Image;
 
 use super::plan::Tile;
@@ -49,7 +49,8 @@ fn mirrored(image: &Image) -> Image {
     Image::new(w, h, c, data).expect("same size")
 }
 
-/// The disparity of the right view of a rectified pair, in the convention `x_other = x − d`.
+/// The disparity of the right view of a rectified pair, in the convention `x_other = x − d`,
+/// and its confidence when the matcher gives one.
 ///
 /// Mirrored, the right image becomes a left one with the same disparity range: a right pixel
 /// `x_r` matches the left `x_r + d`, i.e. `(w − 1 − x_r) − d` in the mirrored left. Mirrored
@@ -58,20 +59,18 @@ pub fn right_view_disparity(
     matcher: &Matcher,
     (left, right): (&Image, &Image),
     range: DisparityRange,
-) -> Result<Image> {
-    let matched = matcher
-        .disparity(
-            &mirrored(right),
-            &mirrored(left),
-            RangeSource::Given(range),
-            &Silent,
-        )?
-        .disparity;
-    let mut disparity = mirrored(&matched);
+) -> Result<(Image, Option<Image>)> {
+    let matched = matcher.disparity(
+        &mirrored(right),
+        &mirrored(left),
+        RangeSource::Given(range),
+        &Silent,
+    )?;
+    let mut disparity = mirrored(&matched.disparity);
     for d in disparity.data_mut() {
         *d = -*d;
     }
-    Ok(disparity)
+    Ok((disparity, matched.confidence.as_ref().map(mirrored)))
 }
 
 /// The right view's points from its disparity ([`right_view_disparity`]), triangulated with
@@ -100,7 +99,7 @@ fn right_view_points(
 }
 
 /// The cells both windows measured with heights within [`AGREEMENT_METRES`], at their mean
-/// height (the points of both counted); `None` when there are none.
+/// height and mean confidence (the points of both counted); `None` when there are none.
 pub fn agreeing_cells(a: &GridWindow, b: &GridWindow) -> Option<GridWindow> {
     let col = a.col.max(b.col);
     let row = a.row.max(b.row);
@@ -113,6 +112,11 @@ pub fn agreeing_cells(a: &GridWindow, b: &GridWindow) -> Option<GridWindow> {
     let at = |g: &GridWindow, c: usize, r: usize| (r - g.row) * g.width + (c - g.col);
     let mut heights = vec![f32::NAN; width * height];
     let mut counts = vec![0u16; width * height];
+    let mut confidence = a
+        .confidence
+        .as_ref()
+        .zip(b.confidence.as_ref())
+        .map(|_| vec![f32::NAN; width * height]);
     let mut any = false;
     for r in row..row_end {
         for c in col..col_end {
@@ -122,6 +126,11 @@ pub fn agreeing_cells(a: &GridWindow, b: &GridWindow) -> Option<GridWindow> {
                 let k = (r - row) * width + (c - col);
                 heights[k] = 0.5 * (za + zb);
                 counts[k] = a.counts[i].saturating_add(b.counts[j]);
+                if let (Some(c), Some(ca), Some(cb)) =
+                    (&mut confidence, &a.confidence, &b.confidence)
+                {
+                    c[k] = 0.5 * (ca[i] + cb[j]);
+                }
                 any = true;
             }
         }
@@ -133,7 +142,20 @@ pub fn agreeing_cells(a: &GridWindow, b: &GridWindow) -> Option<GridWindow> {
         height,
         heights,
         counts,
+        confidence,
     })
+}
+
+/// One view's points gridded on the scene's grid, with their confidence when there is one.
+pub fn view_cells(
+    scene: &Scene,
+    points: &Points,
+    confidence: Option<&Image>,
+) -> Option<GridWindow> {
+    match confidence {
+        Some(c) => rasterize_window_with(points, c.data(), scene.grid, scene.gridding),
+        None => rasterize_window(points, scene.grid, scene.gridding),
+    }
 }
 
 /// Both views' cells of a tile from the left view's points and the right view's disparity: the
@@ -142,16 +164,16 @@ pub fn both_views_cells(
     scene: &Scene,
     tile: &Tile,
     rect: &Rectification,
-    right_disparity: &Image,
-    left_points: &Points,
+    (right_disparity, right_confidence): (&Image, Option<&Image>),
+    (left_points, left_confidence): (&Points, Option<&Image>),
 ) -> Result<Option<GridWindow>> {
-    let Some(left) = rasterize_window(left_points, scene.grid, scene.gridding) else {
+    let Some(left) = view_cells(scene, left_points, left_confidence) else {
         return Ok(None);
     };
     let Some(points) = right_view_points(scene, tile, rect, right_disparity)? else {
         return Ok(None);
     };
-    let Some(right) = rasterize_window(&points, scene.grid, scene.gridding) else {
+    let Some(right) = view_cells(scene, &points, right_confidence) else {
         return Ok(None);
     };
     Ok(agreeing_cells(&left, &right))
@@ -170,6 +192,7 @@ mod tests {
             height,
             counts: vec![1; heights.len()],
             heights,
+            confidence: None,
         }
     }
 
@@ -184,6 +207,17 @@ mod tests {
         assert_eq!(both.heights[0], 10.25);
         assert!(both.heights[1].is_nan(), "3 m apart: a mismatch");
         assert_eq!(both.counts, vec![2, 0]);
+        assert_eq!(both.confidence, None, "neither view has a confidence");
+        let a = GridWindow {
+            confidence: Some(vec![0.9, 0.4, 0.5]),
+            ..a
+        };
+        let b = GridWindow {
+            confidence: Some(vec![0.2, 0.7, 0.1]),
+            ..b
+        };
+        let c = agreeing_cells(&a, &b).unwrap().confidence.unwrap();
+        assert!((c[0] - 0.3).abs() < 1e-6 && c[1].is_nan(), "{c:?}");
         let holes = window(1, 0, 2, vec![nan, 20.0]);
         let far = window(1, 0, 2, vec![10.0, 30.0]);
         assert!(agreeing_cells(&holes, &far).is_none());

@@ -72,6 +72,7 @@ pub fn fabricate_tiles(
             let cells = cells(index, extended);
             record.points = cells.counts.iter().map(|&n| n as usize).sum();
             record.cells = Some((cells.col, cells.row, cells.width, cells.height));
+            record.confidence = Some(true);
             folder.save(&t, &record, Some(&cells))?;
             Ok(record)
         })
@@ -80,11 +81,12 @@ pub fn fabricate_tiles(
 }
 
 /// The cells of tile `index` over `window`: the scene's height plus a small offset of its own,
-/// and 1 to 3 points a cell.
+/// 1 to 3 points a cell, and a confidence.
 fn cells(index: usize, window: Roi) -> GridWindow {
     let n = window.width * window.height;
     let mut heights = Vec::with_capacity(n);
     let mut counts = Vec::with_capacity(n);
+    let mut confidence = Vec::with_capacity(n);
     for y in window.y..window.y + window.height {
         for x in window.x..window.x + window.width {
             let h = height(x, y);
@@ -97,6 +99,11 @@ fn cells(index: usize, window: Roi) -> GridWindow {
                 },
             );
             counts.push(if h.is_nan() { 0 } else { 1 + (k % 3) as u16 });
+            confidence.push(if h.is_nan() {
+                f32::NAN
+            } else {
+                (k % 100) as f32 / 100.0
+            });
         }
     }
     GridWindow {
@@ -106,6 +113,7 @@ fn cells(index: usize, window: Roi) -> GridWindow {
         height: window.height,
         heights,
         counts,
+        confidence: Some(confidence),
     }
 }
 

@@ -1,31 +1,37 @@
 //! Fusion of the DSMs of several pairs on one grid, cell by cell, over the measured cells only.
 //!
 //! A cell's heights (one per pair that measured it) are sorted and cut into clusters wherever two
-//! neighbouring heights differ by more than the tolerance (single linkage). The strongest
-//! cluster (the largest sum of its pairs' weights; a tie goes to the higher cluster, since a DSM
-//! is the top surface and the classic failure of a pair near a building is the ground seen where
-//! the roof is) gives the cell its height, the weighted median of its members, and its spread,
-//! their weighted median absolute deviation. A cell whose strongest cluster has fewer members
-//! than `min_support` stays empty, like a cell no pair measured, and is left to the hole filling.
-//! With equal weights the strongest cluster is the one with most members and the medians are the
-//! plain ones.
+//! neighbouring heights differ by more than the tolerance (single linkage). Each height weighs
+//! its pair's weight times the matcher's confidence in it (the pair's `_confidence.tif`; 1 when
+//! the matcher gives none). The strongest cluster (the largest sum of weights; a tie goes to the
+//! higher cluster, since a DSM is the top surface and the classic failure of a pair near a
+//! building is the ground seen where the roof is) gives the cell its height, the weighted median
+//! of its members, and its spread, their weighted median absolute deviation. A cell whose
+//! strongest cluster has fewer members than `min_support`, or whose members' confidences sum to
+//! less than `min_confidence`, stays empty, like a cell no pair measured, and is left to the
+//! hole filling. With equal weights and no confidence the strongest cluster is the one with most
+//! members and the medians are the plain ones.
 //!
-//! Weights, when asked for, come from a first fusion with equal weights ([`Fused::agreement`]):
-//! the share of a pair's measured cells within the tolerance of the fused height, turned into a
-//! weight by [`pair_weight`]. Agreement is not correctness: pairs that share an image share its
-//! mismatches and agree with each other, and a narrow-baseline pair is noisy without being
-//! wrong, so the weights help on some sets and hurt on others (BENCHMARKS.md) and are off by
-//! default.
+//! Why the confidence: a pair's cell is within 1 m of the truth for 37–60 % of the cells where
+//! the winner's margin over its rival is under 0.1 and 89–98 % where it is over 0.9 (the 12 dev
+//! pairs), so two confident pairs that agree deserve more trust than three hesitant ones
+//! (BENCHMARKS.md).
 //!
-//! Before fusing, each pair's DSM is co-registered on a reference pair's ([`Shift`]: an integer
-//! shift by NCC and a vertical offset, the benchmark's registration between two DSMs, no truth
-//! involved): the RPCs of different pairs disagree by a cell or two and tens of centimetres,
-//! which would otherwise blur every edge and split the clusters.
+//! Pair weights, when asked for, come from a first fusion with equal weights
+//! ([`Fused::agreement`]): the share of a pair's measured cells within the tolerance of the fused
+//! height, turned into a weight by [`pair_weight`]. Agreement is not correctness: pairs that
+//! share an image share its mismatches and agree with each other, and a narrow-baseline pair is
+//! noisy without being wrong, so the weights help on some sets and hurt on others
+//! (BENCHMARKS.md) and are off by default.
+//!
+//! Before fusing, each pair's DSM can be co-registered on a reference pair's ([`Shift`]: an
+//! integer shift by NCC and a vertical offset, the benchmark's registration between two DSMs,
+//! no truth involved).
 //!
 //! Memory: the pairs' DSMs are read by windows of `rows_per_block` rows ([`fuse_files`]); only
 //! one block of every pair and the fused grid are held at once.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use camera::DsmGrid;
@@ -45,6 +51,9 @@ pub struct FusionParams {
     pub tolerance: f32,
     /// Fewest members of the kept cluster for the cell to be trusted.
     pub min_support: usize,
+    /// Least sum of the kept cluster's confidences for the cell to be trusted; `None`: no such
+    /// rule (the pairs have no confidence).
+    pub min_confidence: Option<f32>,
 }
 
 impl Default for FusionParams {
@@ -52,9 +61,46 @@ impl Default for FusionParams {
         FusionParams {
             tolerance: 0.5,
             min_support: 1,
+            min_confidence: None,
         }
     }
 }
+
+/// One pair's measurement of a cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Metres.
+    pub height: f32,
+    /// The pair's weight.
+    pub weight: f32,
+    /// The matcher's confidence in it, `[0, 1]` (1 when it gives none).
+    pub confidence: f32,
+}
+
+impl Sample {
+    /// A pair's height with its weight and confidence (a NaN confidence counts as 0).
+    pub fn new(height: f32, weight: f32, confidence: f32) -> Self {
+        let confidence = if confidence.is_finite() {
+            confidence.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        Sample {
+            height,
+            weight,
+            confidence,
+        }
+    }
+
+    /// What the sample weighs in its cluster: never zero, so that a cell measured only with no
+    /// confidence still has a strongest cluster.
+    fn mass(&self) -> f32 {
+        self.weight * (self.confidence + CONFIDENCE_FLOOR)
+    }
+}
+
+/// Added to every confidence before it weighs a height.
+const CONFIDENCE_FLOOR: f32 = 1e-6;
 
 /// One cell's fused height.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,6 +111,8 @@ pub struct CellFusion {
     pub spread: f32,
     /// Members of the kept cluster.
     pub support: usize,
+    /// Sum of the kept cluster's confidences.
+    pub confidence: f32,
 }
 
 /// The weighted median of `v` (sorted by value, weights > 0, non-empty): the first value at
@@ -85,12 +133,12 @@ fn weighted_median(v: &[(f32, f32)]) -> f32 {
     v[v.len() - 1].0
 }
 
-/// Fuses the finite heights of `values`, `(height, weight of its pair)` (others ignored; the
-/// slice is reordered), `None` when no cluster has `min_support` members.
-pub fn fuse_cell(values: &mut [(f32, f32)], p: &FusionParams) -> Option<CellFusion> {
+/// Fuses the finite heights of `values` (others ignored; the slice is reordered), `None` when
+/// no cluster has `min_support` members and `min_confidence` of confidence.
+pub fn fuse_cell(values: &mut [Sample], p: &FusionParams) -> Option<CellFusion> {
     let mut n = 0;
     for i in 0..values.len() {
-        if values[i].0.is_finite() {
+        if values[i].height.is_finite() {
             values.swap(n, i);
             n += 1;
         }
@@ -99,26 +147,28 @@ pub fn fuse_cell(values: &mut [(f32, f32)], p: &FusionParams) -> Option<CellFusi
     if v.is_empty() {
         return None;
     }
-    v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    v.sort_unstable_by(|a, b| a.height.total_cmp(&b.height));
     // The strongest cluster: the largest weight, the later (higher) one on a tie.
     let (mut best, mut best_weight, mut start, mut weight) = ((0, 0), f32::MIN, 0, 0.0);
     for i in 0..=v.len() {
-        if i == v.len() || (i > start && v[i].0 - v[i - 1].0 > p.tolerance) {
+        if i == v.len() || (i > start && v[i].height - v[i - 1].height > p.tolerance) {
             if weight >= best_weight {
                 (best, best_weight) = ((start, i), weight);
             }
             (start, weight) = (i, 0.0);
         }
         if i < v.len() {
-            weight += v[i].1;
+            weight += v[i].mass();
         }
     }
     let cluster = &v[best.0..best.1];
-    if cluster.len() < p.min_support.max(1) {
+    let confidence: f32 = cluster.iter().map(|s| s.confidence).sum();
+    if cluster.len() < p.min_support.max(1) || p.min_confidence.is_some_and(|m| confidence < m) {
         return None;
     }
-    let height = weighted_median(cluster);
-    let mut dev: Vec<(f32, f32)> = cluster
+    let weighted: Vec<(f32, f32)> = cluster.iter().map(|s| (s.height, s.mass())).collect();
+    let height = weighted_median(&weighted);
+    let mut dev: Vec<(f32, f32)> = weighted
         .iter()
         .map(|&(h, w)| ((h - height).abs(), w))
         .collect();
@@ -127,6 +177,7 @@ pub fn fuse_cell(values: &mut [(f32, f32)], p: &FusionParams) -> Option<CellFusi
         height,
         spread: weighted_median(&dev),
         support: cluster.len(),
+        confidence,
     })
 }
 
@@ -170,6 +221,8 @@ pub struct Fused {
     pub counts: Vec<u16>,
     /// Spread of the kept cluster, NaN where none.
     pub spreads: Vec<f32>,
+    /// Summed confidence of the kept cluster, NaN where none.
+    pub confidences: Vec<f32>,
     /// Per layer, how often it agrees with the fused heights ([`fuse_files`] only).
     pub agreement: Vec<Agreement>,
 }
@@ -180,6 +233,7 @@ impl Fused {
             heights: Vec::with_capacity(n),
             counts: Vec::with_capacity(n),
             spreads: Vec::with_capacity(n),
+            confidences: Vec::with_capacity(n),
             agreement: Vec::new(),
         }
     }
@@ -188,6 +242,7 @@ impl Fused {
         self.heights.extend(other.heights);
         self.counts.extend(other.counts);
         self.spreads.extend(other.spreads);
+        self.confidences.extend(other.confidences);
     }
 
     /// Cells with a fused height.
@@ -197,35 +252,45 @@ impl Fused {
 }
 
 /// Fuses the same `cells` cells of every layer (one layer per pair, NaN = not measured), each
-/// layer's heights weighted by `weights[layer]`.
-pub fn fuse_block(layers: &[Vec<f32>], weights: &[f32], cells: usize, p: &FusionParams) -> Fused {
+/// layer's heights weighted by `weights[layer]` and by their confidence (`confidences[layer]`,
+/// the same cells; 1 everywhere when `None`).
+pub fn fuse_block(
+    layers: &[Vec<f32>],
+    confidences: Option<&[Vec<f32>]>,
+    weights: &[f32],
+    cells: usize,
+    p: &FusionParams,
+) -> Fused {
     assert_eq!(layers.len(), weights.len(), "one weight per layer");
-    let results: Vec<(f32, u16, f32)> = (0..cells)
+    if let Some(c) = confidences {
+        assert_eq!(c.len(), layers.len(), "one confidence layer per layer");
+    }
+    let results: Vec<(f32, u16, f32, f32)> = (0..cells)
         .into_par_iter()
         .map_init(
             || Vec::with_capacity(layers.len()),
-            |values, i| {
+            |values: &mut Vec<Sample>, i| {
                 values.clear();
-                values.extend(
-                    layers
-                        .iter()
-                        .zip(weights)
-                        .map(|(l, &w)| (l[i], w))
-                        .filter(|v| v.0.is_finite()),
-                );
+                for (k, (l, &w)) in layers.iter().zip(weights).enumerate() {
+                    if l[i].is_finite() {
+                        let c = confidences.map_or(1.0, |c| c[k][i]);
+                        values.push(Sample::new(l[i], w, c));
+                    }
+                }
                 let count = values.len().min(u16::MAX as usize) as u16;
                 match fuse_cell(values, p) {
-                    Some(c) => (c.height, count, c.spread),
-                    None => (f32::NAN, count, f32::NAN),
+                    Some(c) => (c.height, count, c.spread, c.confidence),
+                    None => (f32::NAN, count, f32::NAN, f32::NAN),
                 }
             },
         )
         .collect();
     let mut out = Fused::with_capacity(cells);
-    for (h, n, s) in results {
+    for (h, n, s, c) in results {
         out.heights.push(h);
         out.counts.push(n);
         out.spreads.push(s);
+        out.confidences.push(c);
     }
     out
 }
@@ -283,11 +348,36 @@ fn read_shifted(
     Ok(out)
 }
 
-/// Fuses the single-band DSMs at `paths`, all on `grid`, each moved by its shift and weighted
-/// by its weight, reading `rows_per_block` rows of each at a time; the result also says how
-/// often each DSM agrees with it.
+/// One pair's DSM to fuse: its file, its confidence sidecar when the fusion uses them, and how
+/// it is moved onto the reference.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layer {
+    pub dsm: PathBuf,
+    pub confidence: Option<PathBuf>,
+    pub shift: Shift,
+}
+
+/// Opens a single-band raster of the fused grid, or says how to get a good one.
+fn open_layer(path: &Path, (w, h): (usize, usize)) -> Result<TiffReader> {
+    let r = TiffReader::open(path).with_context(|| format!("opening {}", path.display()))?;
+    if r.size() != (w, h) || r.bands() != 1 {
+        bail!(
+            "{}: {}x{}x{} cells, expected one band of {w}x{h} (the fused grid): delete it so \
+             that its pair is reconstructed again",
+            path.display(),
+            r.size().0,
+            r.size().1,
+            r.bands()
+        );
+    }
+    Ok(r)
+}
+
+/// Fuses the single-band DSMs of `layers`, all on `grid`, each moved by its shift and weighted
+/// by its weight and (when every layer has one) its confidence, reading `rows_per_block` rows of
+/// each at a time; the result also says how often each DSM agrees with it.
 pub fn fuse_files(
-    paths: &[(PathBuf, Shift)],
+    layers: &[Layer],
     weights: &[f32],
     grid: &DsmGrid,
     rows_per_block: usize,
@@ -295,38 +385,46 @@ pub fn fuse_files(
     progress: &dyn Progress,
 ) -> Result<Fused> {
     let (w, h) = (grid.width, grid.height);
-    let mut readers = Vec::with_capacity(paths.len());
-    for (path, _) in paths {
-        let r = TiffReader::open(path).with_context(|| format!("opening {}", path.display()))?;
-        if r.size() != (w, h) || r.bands() != 1 {
-            bail!(
-                "{}: {}x{}x{} cells, expected one band of {w}x{h} (the fused grid): delete it so \
-                 that its pair is reconstructed again",
-                path.display(),
-                r.size().0,
-                r.size().1,
-                r.bands()
-            );
+    let mut readers = Vec::with_capacity(layers.len());
+    let mut confidence_readers = Vec::with_capacity(layers.len());
+    for layer in layers {
+        readers.push(open_layer(&layer.dsm, (w, h))?);
+        if let Some(c) = &layer.confidence {
+            confidence_readers.push(open_layer(c, (w, h))?);
         }
-        readers.push(r);
     }
+    let with_confidence = !layers.is_empty() && confidence_readers.len() == layers.len();
     let rows = rows_per_block.max(1);
     let blocks = h.div_ceil(rows);
     let mut out = Fused::with_capacity(w * h);
-    out.agreement = vec![Agreement::default(); paths.len()];
+    out.agreement = vec![Agreement::default(); layers.len()];
     progress.begin("fusing", blocks);
     for b in 0..blocks {
         let (y0, n) = (b * rows, rows.min(h - b * rows));
-        let layers: Vec<Vec<f32>> = readers
+        let read = |r: &mut TiffReader, path: &Path, shift: Shift| {
+            read_shifted(r, (w, h), y0, n, shift)
+                .with_context(|| format!("reading rows {y0}.. of {}", path.display()))
+        };
+        let heights: Vec<Vec<f32>> = readers
             .iter_mut()
-            .zip(paths)
-            .map(|(r, (path, shift))| {
-                read_shifted(r, (w, h), y0, n, *shift)
-                    .with_context(|| format!("reading rows {y0}.. of {}", path.display()))
-            })
+            .zip(layers)
+            .map(|(r, l)| read(r, &l.dsm, l.shift))
             .collect::<Result<_>>()?;
-        let block = fuse_block(&layers, weights, w * n, p);
-        count_agreement(&layers, &block.heights, p.tolerance, &mut out.agreement);
+        let confidences: Option<Vec<Vec<f32>>> = if with_confidence {
+            // The confidence moves with its DSM, without the vertical offset.
+            let moved = |s: Shift| Shift { offset: 0.0, ..s };
+            Some(
+                confidence_readers
+                    .iter_mut()
+                    .zip(layers)
+                    .map(|(r, l)| read(r, l.confidence.as_deref().expect("all"), moved(l.shift)))
+                    .collect::<Result<_>>()?,
+            )
+        } else {
+            None
+        };
+        let block = fuse_block(&heights, confidences.as_deref(), weights, w * n, p);
+        count_agreement(&heights, &block.heights, p.tolerance, &mut out.agreement);
         out.extend(block);
         progress.advance(b + 1);
     }
@@ -346,7 +444,13 @@ mod tests {
     }
 
     fn fuse_weighted(v: &[f32], w: &[f32], p: &FusionParams) -> Option<CellFusion> {
-        let mut values: Vec<(f32, f32)> = v.iter().copied().zip(w.iter().copied()).collect();
+        fuse_confident(v, w, &vec![1.0; v.len()], p)
+    }
+
+    fn fuse_confident(v: &[f32], w: &[f32], c: &[f32], p: &FusionParams) -> Option<CellFusion> {
+        let mut values: Vec<Sample> = (0..v.len())
+            .map(|i| Sample::new(v[i], w[i], c[i]))
+            .collect();
         fuse_cell(&mut values, p)
     }
 
@@ -355,6 +459,7 @@ mod tests {
         let p = FusionParams {
             tolerance: 1.0,
             min_support: 1,
+            min_confidence: None,
         };
         // Three pairs see the roof near 20 m, two the ground near 10 m.
         let c = fuse(&[10.0, 20.2, 19.9, 10.3, 20.0], &p).unwrap();
@@ -384,6 +489,7 @@ mod tests {
         let p = FusionParams {
             tolerance: 1.0,
             min_support: 1,
+            min_confidence: None,
         };
         let v = [10.0, 20.2, 19.9, 10.3, 20.0];
         // Two trusted pairs on the ground outweigh three poor ones on the roof.
@@ -407,6 +513,41 @@ mod tests {
         for w in [0.3f32, 1.0, 7.0] {
             assert_eq!(fuse_weighted(&v, &[w; 5], &p), fuse(&v, &p), "weight {w}");
         }
+    }
+
+    #[test]
+    fn confidence_weighs_the_heights_and_its_sum_decides_the_trust() {
+        let p = FusionParams {
+            tolerance: 1.0,
+            min_support: 1,
+            min_confidence: Some(1.25),
+        };
+        let v = [10.0, 20.2, 19.9, 10.3, 20.0];
+        let ones = [1.0; 5];
+        // Two confident pairs on the ground outweigh three hesitant ones on the roof.
+        let c = fuse_confident(&v, &ones, &[0.9, 0.1, 0.2, 0.8, 0.1], &p).unwrap();
+        assert_eq!(c.support, 2);
+        assert!((c.confidence - 1.7).abs() < 1e-6, "{c:?}");
+        assert!(
+            (c.height - 10.0).abs() < 1e-6,
+            "the more confident of the two: {c:?}"
+        );
+        // Three hesitant pairs that agree are not enough; two confident ones are.
+        let roof = [20.2, 19.9, 20.0];
+        assert_eq!(fuse_confident(&roof, &[1.0; 3], &[0.3, 0.4, 0.5], &p), None);
+        let two = fuse_confident(&roof[..2], &[1.0; 2], &[0.7, 0.6], &p).unwrap();
+        assert_eq!(two.support, 2);
+        // A NaN confidence counts as none; without the rule the cell keeps its height.
+        let nan = fuse_confident(&[5.0], &[1.0], &[NAN], &FusionParams::default()).unwrap();
+        assert_eq!((nan.height, nan.confidence), (5.0, 0.0));
+        // A confidence of 1 everywhere is the plain fusion, its sum the support.
+        let plain = FusionParams {
+            min_confidence: None,
+            ..p
+        };
+        let c = fuse_confident(&v, &ones, &ones, &plain).unwrap();
+        assert_eq!(Some(c), fuse(&v, &plain));
+        assert_eq!(c.confidence, 3.0);
     }
 
     #[test]
@@ -443,8 +584,9 @@ mod tests {
         let p = FusionParams {
             tolerance: 1.0,
             min_support: 1,
+            min_confidence: None,
         };
-        let f = fuse_block(&layers, &[1.0; 3], 4, &p);
+        let f = fuse_block(&layers, None, &[1.0; 3], 4, &p);
         assert_eq!(f.counts, vec![2, 0, 3, 1]);
         assert_eq!(f.heights[0], 1.25);
         assert!(f.heights[1].is_nan() && f.spreads[1].is_nan());
@@ -477,9 +619,15 @@ mod tests {
             layers.push(data);
         }
         let p = FusionParams::default();
-        let whole = fuse_block(&layers, &[1.0; 4], 63, &p);
-        let paths: Vec<(PathBuf, Shift)> =
-            paths.into_iter().map(|p| (p, Shift::default())).collect();
+        let whole = fuse_block(&layers, None, &[1.0; 4], 63, &p);
+        let paths: Vec<Layer> = paths
+            .into_iter()
+            .map(|p| Layer {
+                dsm: p,
+                confidence: None,
+                shift: Shift::default(),
+            })
+            .collect();
         let mut agreement = vec![Agreement::default(); 4];
         count_agreement(&layers, &whole.heights, p.tolerance, &mut agreement);
         assert!(agreement.iter().all(|a| a.compared > 0));
@@ -532,11 +680,16 @@ mod tests {
                 .collect();
             let path = dir.path().join(format!("p{k}.tif"));
             camera::write_dsm(&path, &Image::new(w, h, 1, data).unwrap(), &grid).unwrap();
-            paths.push((path, Shift::default()));
+            paths.push(Layer {
+                dsm: path,
+                confidence: None,
+                shift: Shift::default(),
+            });
         }
         let p = FusionParams {
             tolerance: 0.4,
             min_support: 2,
+            min_confidence: None,
         };
         let error = |f: &Fused| {
             let e: Vec<f32> = (0..w * h)

@@ -10,9 +10,12 @@
 //! OUT/dsm_count.tif           pairs that measured each cell
 //! OUT/dsm_spread.tif          median absolute deviation of the kept cluster, metres; NaN where
 //!                             no cluster was kept (the height there, if any, is filled)
+//! OUT/dsm_confidence.tif      summed matcher confidence of the kept cluster's pairs (each in
+//!                             [0, 1]; 1 a pair when the matcher gives none); NaN where none
 //! OUT/dsm_report.json         chosen pairs and their score terms, per-pair coverage (and scores),
 //!                             fused coverage (and scores), times
 //! OUT/dsm_work/pairs/<pair>.tif       the pair's DSM, measured cells only
+//! OUT/dsm_work/pairs/<pair>_confidence.tif   the matcher's confidence of its cells
 //! OUT/dsm_work/pairs/<pair>_work/     the pair's tiles (resumable: a rerun redoes only
 //!                                     unfinished tiles of unfinished pairs)
 //! ```
@@ -33,7 +36,7 @@ use dataset::shard::Shard;
 use raster::Image;
 use serde::Serialize;
 
-use super::fuse::{fuse_files, pair_weight, Agreement, Fused, FusionParams, Shift};
+use super::fuse::{fuse_files, pair_weight, Agreement, Fused, FusionParams, Layer, Shift};
 use super::raw::RawImage;
 use super::select::{
     choose_pairs, json_metadata, parse_day, rank_pairs, Acquisition, PairChoice, View,
@@ -70,9 +73,13 @@ pub struct ReconstructManyOptions {
     /// Heights of one cell further apart than this, metres, are different surfaces
     /// ([`FusionParams::tolerance`]).
     pub cluster_tolerance: f32,
-    /// Fewest pairs that must agree for a cell to keep a measured height; `None`:
-    /// [`auto_min_support`] of the pairs fused.
+    /// Fewest pairs that must agree for a cell to keep a measured height; `None`: 1 when the
+    /// confidence rule applies, else [`auto_min_support`] of the pairs fused.
     pub min_support: Option<usize>,
+    /// Least summed confidence of the agreeing pairs for a cell to keep a measured height, when
+    /// every pair has a confidence (the classical matcher); `None`: [`auto_min_confidence`] of
+    /// the pairs fused; 0 turns the rule off.
+    pub min_confidence: Option<f32>,
     /// Register every pair's DSM on the first pair's (NCC shift, vertical offset) before fusing.
     pub co_register: bool,
     /// Weight each pair by its agreement with a first, equal-weight fusion ([`pair_weight`]);
@@ -105,9 +112,27 @@ pub struct ReconstructManyOptions {
 /// Default number of pairs.
 pub const DEFAULT_PAIRS: usize = 12;
 
+/// The confidence a kept cluster needs per pair fused ([`auto_min_confidence`]).
+pub const MIN_CONFIDENCE_PER_PAIR: f32 = 0.1;
+
+/// The default least summed confidence of a kept cluster in a fusion of `pairs` DSMs: 0.1 a
+/// pair (1.2 for 12: about two pairs at the median confidence, 0.63 on the dev pairs, or three
+/// hesitant ones). More pairs mean more chance agreements, as for the count rule. Against that
+/// rule (ten dev images; MAE m / within 1 m %): 6 pairs 0.807 / 83.4 against 0.860 / 81.3,
+/// 8 pairs 0.817 / 83.2 against 0.886 / 80.9, 12 pairs 0.803 / 83.6 against 0.841 / 83.0,
+/// 16 pairs 0.823 / 83.3 against 0.871 / 82.8, 20 pairs 0.813 / 83.6 against 0.885 / 82.8; the
+/// six-date world at 384² and 512², 12 pairs 0.59 / 90.6 and 0.55 / 91.7 against 0.73 / 89.3
+/// and 0.56 / 91.3, 6 pairs 0.66 / 89.5 and 0.63 / 91.1 against 0.81 / 87.1 and 0.66 / 90.6
+/// (BENCHMARKS.md). A fixed sum is not right for every count: 1.25 with 6 pairs gives 0.89 m
+/// on the world.
+pub fn auto_min_confidence(pairs: usize) -> f32 {
+    MIN_CONFIDENCE_PER_PAIR * pairs as f32
+}
+
 impl ReconstructManyOptions {
-    /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_support`], no
-    /// co-registration, equal weights, fill 40 cells, 7×7 median.
+    /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_confidence`]
+    /// (else [`auto_min_support`]), no co-registration, equal weights, fill 40 cells, 7×7
+    /// median.
     pub fn new(
         images: Vec<PathBuf>,
         rpc_dir: Option<PathBuf>,
@@ -125,6 +150,7 @@ impl ReconstructManyOptions {
             dry_run: false,
             cluster_tolerance: FusionParams::default().tolerance,
             min_support: None,
+            min_confidence: None,
             co_register: false,
             weight_pairs: false,
             fill_holes: Some(DEFAULT_FILL_CELLS),
@@ -211,6 +237,7 @@ pub struct FusedOutcome {
     pub dsm: PathBuf,
     pub count: PathBuf,
     pub spread: PathBuf,
+    pub confidence: PathBuf,
     /// Pairs fused.
     pub pairs: usize,
     pub grid: DsmGrid,
@@ -385,14 +412,21 @@ fn fuse_pairs(
             Shift::default()
         };
         p.registration = Some(shift);
-        layers.push((p.dsm.clone(), shift));
+        let confidence = crate::dsm::confidence_path(&p.dsm);
+        layers.push(Layer {
+            dsm: p.dsm.clone(),
+            confidence: confidence.is_file().then_some(confidence),
+            shift,
+        });
     }
-    let params = FusionParams {
-        tolerance: opts.cluster_tolerance,
-        min_support: opts
-            .min_support
-            .unwrap_or_else(|| auto_min_support(layers.len())),
-    };
+    let confident = layers.iter().all(|l| l.confidence.is_some());
+    if !confident {
+        // A layer without confidence weighs 1: mixing would favour it.
+        for l in &mut layers {
+            l.confidence = None;
+        }
+    }
+    let params = fusion_params(opts, layers.len(), confident);
     summary.fusion = Some(params);
     let equal = vec![1.0; layers.len()];
     let mut fused = fuse_files(&layers, &equal, grid, rows, &params, progress)?;
@@ -416,7 +450,26 @@ fn fuse_pairs(
     Ok(())
 }
 
-/// The default agreement of a fusion of `pairs` DSMs: at least 2 pairs (a height that only one
+/// The fusion's rules for `pairs` DSMs, `confident` when every one has a confidence sidecar:
+/// then the summed confidence decides which cells are trusted (and the count only when asked),
+/// else the count of agreeing pairs.
+fn fusion_params(opts: &ReconstructManyOptions, pairs: usize, confident: bool) -> FusionParams {
+    let min_confidence = opts
+        .min_confidence
+        .unwrap_or_else(|| auto_min_confidence(pairs));
+    let by_confidence = confident && min_confidence > 0.0;
+    FusionParams {
+        tolerance: opts.cluster_tolerance,
+        min_support: opts.min_support.unwrap_or(if by_confidence {
+            1
+        } else {
+            auto_min_support(pairs)
+        }),
+        min_confidence: by_confidence.then_some(min_confidence),
+    }
+}
+
+/// The default agreement of a fusion of `pairs` DSMs without confidence: at least 2 pairs (a height that only one
 /// pair measured is too often a mismatch), a quarter of them from 12 pairs on, never more than
 /// there are pairs. On the dev set (12 pairs, 1 m clusters) 1, 2, 3, 4 agreeing pairs gave 1.42,
 /// 1.05, 0.93, 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
@@ -544,7 +597,8 @@ fn run_pair(
     out
 }
 
-/// Fills (where no cluster was kept), filters and writes the fused DSM, its count and spread.
+/// Fills (where no cluster was kept), filters and writes the fused DSM, its count, spread and
+/// confidence.
 fn write_fused(
     opts: &ReconstructManyOptions,
     fused: Fused,
@@ -555,14 +609,14 @@ fn write_fused(
     let (w, h) = (grid.width, grid.height);
     let measured_cells = fused.measured();
     let count = Image::new(w, h, 1, fused.counts.iter().map(|&c| c as f32).collect())?;
-    let spread = Image::new(w, h, 1, fused.spreads)?;
     let (count_path, spread_path) = (opts.sibling("_count.tif"), opts.sibling("_spread.tif"));
-    write_dsm(&count_path, &count, grid)
-        .with_context(|| format!("writing {}", count_path.display()))?;
-    drop(count);
-    write_dsm(&spread_path, &spread, grid)
-        .with_context(|| format!("writing {}", spread_path.display()))?;
-    drop(spread);
+    let confidence_path = opts.sibling("_confidence.tif");
+    let write = |path: &Path, image: Image| {
+        write_dsm(path, &image, grid).with_context(|| format!("writing {}", path.display()))
+    };
+    write(&count_path, count)?;
+    write(&spread_path, Image::new(w, h, 1, fused.spreads)?)?;
+    write(&confidence_path, Image::new(w, h, 1, fused.confidences)?)?;
     let dsm = Image::new(w, h, 1, fused.heights)?;
     let fill = opts.fill_holes.map(camera::HoleFill::spanning);
     let dsm = finish_dsm(dsm, fill, opts.median_filter)?;
@@ -572,6 +626,7 @@ fn write_fused(
         dsm: opts.output.clone(),
         count: count_path,
         spread: spread_path,
+        confidence: confidence_path,
         pairs,
         grid: grid.clone(),
         measured_cells,
@@ -785,6 +840,7 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
         ("-o", opts.output.clone()),
         ("the count raster", opts.sibling("_count.tif")),
         ("the spread raster", opts.sibling("_spread.tif")),
+        ("the confidence raster", opts.sibling("_confidence.tif")),
         ("the report", opts.sibling("_report.json")),
     ] {
         check_output_file(flag, &out, &inputs, overwrite)?;
@@ -863,9 +919,9 @@ fn union_bounds(chosen: &[PairChoice], resolution: f64) -> [f64; 4] {
     ]
 }
 
-/// Bytes per fused cell held at once: heights, counts, spreads, and the filled and filtered
-/// copies of the heights.
-const FUSE_BYTES_PER_CELL: u64 = 22;
+/// Bytes per fused cell held at once: heights, counts, spreads, confidences, and the filled and
+/// filtered copies of the heights.
+const FUSE_BYTES_PER_CELL: u64 = 26;
 
 /// Rows of each pair read at once, refused when the fused grid does not fit the budget.
 fn fusion_rows(grid: &DsmGrid, pairs: usize, max_memory: u64) -> Result<usize> {
@@ -881,9 +937,10 @@ fn fusion_rows(grid: &DsmGrid, pairs: usize, max_memory: u64) -> Result<usize> {
             super::gib(max_memory)
         );
     }
-    // A block of every pair (read buffer and copy) in an eighth of what is left, 16 rows at least.
+    // A block of every pair (heights and confidences: read buffer and copy) in an eighth of what
+    // is left, 16 rows at least.
     let left = (max_memory - held - super::PROCESS_BYTES) / 8;
-    let per_row = (grid.width * pairs.max(1) * 8) as u64;
+    let per_row = (grid.width * pairs.max(1) * 16) as u64;
     Ok(((left / per_row.max(1)) as usize).clamp(16, grid.height.max(16)))
 }
 
@@ -895,5 +952,38 @@ mod tests {
     fn agreement_grows_with_the_pairs_but_never_beyond_them() {
         let m: Vec<usize> = [1, 2, 3, 8, 12, 16, 20].map(auto_min_support).to_vec();
         assert_eq!(m, vec![1, 2, 2, 2, 3, 4, 5]);
+        assert!((auto_min_confidence(12) - 1.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn confidences_decide_when_every_pair_has_one_and_the_count_otherwise() {
+        let opts = ReconstructManyOptions::new(
+            vec![],
+            None,
+            Matcher::Classical(Default::default()),
+            GridChoice::Like("t.tif".into()),
+            "o.tif".into(),
+        );
+        let p = fusion_params(&opts, 12, true);
+        assert_eq!((p.min_support, p.min_confidence), (1, Some(1.2)));
+        let p = fusion_params(&opts, 12, false);
+        assert_eq!((p.min_support, p.min_confidence), (3, None));
+        let given = ReconstructManyOptions {
+            min_confidence: Some(0.0),
+            ..opts.clone()
+        };
+        let p = fusion_params(&given, 12, true);
+        assert_eq!(
+            (p.min_support, p.min_confidence),
+            (3, None),
+            "0 turns it off"
+        );
+        let given = ReconstructManyOptions {
+            min_confidence: Some(2.0),
+            min_support: Some(2),
+            ..opts
+        };
+        let p = fusion_params(&given, 6, true);
+        assert_eq!((p.min_support, p.min_confidence), (2, Some(2.0)));
     }
 }

@@ -1,7 +1,7 @@
 //! The DSM assembled from the tiles' cells one block of rows at a time, so that its memory does
 //! not grow with the scene: each block is merged with a halo of rows around it (as far as the
 //! hole filling and the median filter reach), finished, cropped back to the block and streamed
-//! into the DSM and its filled-cell sidecar. The bytes are those of a merge of the whole grid at
+//! into the DSM, its filled-cell sidecar and (with the classical matcher) its confidence sidecar. The bytes are those of a merge of the whole grid at
 //! once: every finished cell of a block depends only on cells inside its halo.
 
 use std::ops::Range;
@@ -19,8 +19,8 @@ use super::mosaic::Mosaic;
 use super::tile::{TileRecord, TileStatus};
 use super::{gib, ReconstructOptions};
 use crate::dsm::{
-    filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS, DEFAULT_FILL_REACH,
-    DEFAULT_MEDIAN_CELLS,
+    confidence_path, filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS,
+    DEFAULT_FILL_REACH, DEFAULT_MEDIAN_CELLS,
 };
 
 /// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
@@ -34,12 +34,15 @@ pub struct Finishing {
     pub gridding: Gridding,
     pub fill_holes: Option<HoleFill>,
     pub median_filter: Option<usize>,
+    /// Write the measured cells' confidence beside the DSM ([`confidence_path`]): the tiles
+    /// carry one (the classical matcher's).
+    pub confidence: bool,
 }
 
 impl Default for Finishing {
     /// What a single pair's DSM gets by default: median gridding, filling along rays of
     /// [`DEFAULT_FILL_CELLS`] up to [`DEFAULT_FILL_REACH`] cells from the data, a
-    /// [`DEFAULT_MEDIAN_CELLS`] median.
+    /// [`DEFAULT_MEDIAN_CELLS`] median, the classical matcher's confidence beside it.
     fn default() -> Self {
         Finishing {
             gridding: Gridding::Median,
@@ -48,6 +51,7 @@ impl Default for Finishing {
                 reach: DEFAULT_FILL_REACH,
             }),
             median_filter: Some(DEFAULT_MEDIAN_CELLS),
+            confidence: true,
         }
     }
 }
@@ -61,6 +65,7 @@ impl Finishing {
                 reach: opts.fill_reach.min(span),
             }),
             median_filter: opts.median_filter,
+            confidence: opts.matcher.gives_confidence(),
         }
     }
 
@@ -78,6 +83,9 @@ impl Finishing {
 /// it (height + count as float32).
 const BLOCK_BYTES_PER_CELL: u64 = 34;
 
+/// What the confidence adds per cell: its mosaic, its sidecar's rows and the tiles' band.
+const CONFIDENCE_BYTES_PER_CELL: u64 = 12;
+
 /// Memory the assembly of the DSM needs, bytes: one block of `block_rows` rows with its halo
 /// (the whole grid when the halo reaches past it), and the two COG writers (per level a row of
 /// tiles waiting to be complete, and a block's compressed tiles and halved rows).
@@ -87,11 +95,18 @@ pub fn merge_memory(grid: &DsmGrid, finishing: &Finishing, block_rows: usize) ->
     let rows = block_rows
         .saturating_add(halo.saturating_mul(2))
         .min(grid.height) as u64;
-    let block = rows * width * BLOCK_BYTES_PER_CELL;
+    let per_cell = BLOCK_BYTES_PER_CELL
+        + if finishing.confidence {
+            CONFIDENCE_BYTES_PER_CELL
+        } else {
+            0
+        };
+    let block = rows * width * per_cell;
     let written = block_rows.min(grid.height) as u64;
     // The levels' widths halve: all of them together hold at most twice level 0's rows.
     let writer = width * 4 * (2 * (COG_TILE as u64 + 1) + 2 * written);
-    block + 2 * writer
+    let writers = 2 + u64::from(finishing.confidence);
+    block + writers * writer
 }
 
 /// The refusal when the assembly does not fit in `max_memory`.
@@ -112,8 +127,9 @@ pub fn check_merge_memory(grid: &DsmGrid, merge_memory: u64, max_memory: u64) ->
 /// A tile's cells on the grid: column, row, width, height.
 type Cells = (usize, usize, usize, usize);
 
-/// Merges the finished tiles' cells into the DSM at `output` (and its filled-cell sidecar),
-/// `block_rows` rows at a time, finishing it on the way (holes, median filter).
+/// Merges the finished tiles' cells into the DSM at `output` (and its filled-cell and
+/// confidence sidecars), `block_rows` rows at a time, finishing it on the way (holes, median
+/// filter).
 pub fn merge_tiles(
     finishing: &Finishing,
     grid: &DsmGrid,
@@ -133,6 +149,19 @@ pub fn merge_tiles(
     let sidecar = filled_path(output);
     let mut dsm_out = Output::create(output, grid)?;
     let mut filled_out = Output::create(&sidecar, grid)?;
+    // Only when every tile's cells carry it (tiles of an earlier version, resumed, do not); a
+    // sidecar left by an earlier run of this output would no longer match the DSM.
+    let confidence_file = confidence_path(output);
+    let with_confidence =
+        finishing.confidence && parts.iter().all(|(r, _)| r.confidence == Some(true));
+    let mut confidence_out = if with_confidence {
+        Some(Output::create(&confidence_file, grid)?)
+    } else {
+        if confidence_file.is_file() {
+            std::fs::remove_file(&confidence_file).map_err(|e| failed(&confidence_file, e))?;
+        }
+        None
+    };
     let (mut measured_cells, mut filled_cells) = (0, 0);
     let halo = finishing.halo();
     for start in (0..grid.height).step_by(block_rows.max(1)) {
@@ -149,22 +178,29 @@ pub fn merge_tiles(
         for part in cells.iter().flatten() {
             mosaic.add(part);
         }
-        let measured = mosaic.into_image();
+        let (measured, confidence) = mosaic.into_images();
         let finished = finish_dsm(
             measured.clone(),
             finishing.fill_holes,
             finishing.median_filter,
         )?;
         let core = (block.start - window.start)..(block.end - window.start);
+        let confidence = rows_of(&confidence, core.clone());
         let (measured, finished) = (rows_of(&measured, core.clone()), rows_of(&finished, core));
         measured_cells += finite(&measured);
         filled_cells += finite(&finished);
         let filled = filled_mask(&measured, &finished)?;
         dsm_out.write(&finished)?;
         filled_out.write(&filled)?;
+        if let Some(out) = &mut confidence_out {
+            out.write(&confidence)?;
+        }
     }
     dsm_out.finish()?;
     filled_out.finish()?;
+    if let Some(out) = confidence_out {
+        out.finish()?;
+    }
     Ok(DsmSummary {
         points,
         measured_cells,
@@ -242,7 +278,7 @@ mod tests {
                 points += r.points;
             }
         }
-        let measured = mosaic.into_image();
+        let (measured, confidence) = mosaic.into_images();
         let finished = finish_dsm(
             measured.clone(),
             finishing.fill_holes,
@@ -252,11 +288,14 @@ mod tests {
         let filled = filled_mask(&measured, &finished).unwrap();
         camera::write_dsm(output, &finished, grid).unwrap();
         camera::write_dsm(filled_path(output), &filled, grid).unwrap();
+        if finishing.confidence {
+            camera::write_dsm(confidence_path(output), &confidence, grid).unwrap();
+        }
         (points, finite(&measured), finite(&finished))
     }
 
     /// Buildings, occluded strips, voids and a failed tile across blocks of 32 rows: the DSM and
-    /// its sidecar are byte for byte those of the whole-grid merge, with the same counts.
+    /// its sidecars are byte for byte those of the whole-grid merge, with the same counts.
     #[test]
     fn blocks_of_rows_make_the_bytes_of_the_whole_grid_merge() {
         let dir = tempfile::tempdir().unwrap();
@@ -269,16 +308,19 @@ mod tests {
                 gridding: Gridding::Median,
                 fill_holes: Some(HoleFill::spanning(DEFAULT_FILL_CELLS)),
                 median_filter: Some(DEFAULT_MEDIAN_CELLS),
+                confidence: true,
             },
             Finishing {
                 gridding: Gridding::Max,
                 fill_holes: Some(HoleFill::spanning(3)),
                 median_filter: Some(5),
+                confidence: true,
             },
             Finishing {
                 gridding: Gridding::Max,
                 fill_holes: None,
                 median_filter: None,
+                confidence: false,
             },
         ];
         for finishing in finishings {
@@ -302,7 +344,15 @@ mod tests {
                     (s.points, s.measured_cells, s.filled_cells),
                     (points, measured, filled)
                 );
-                for (a, b) in [(&whole, &out), (&filled_path(&whole), &filled_path(&out))] {
+                assert_eq!(confidence_path(&out).is_file(), finishing.confidence);
+                let mut files = vec![
+                    (whole.clone(), out.clone()),
+                    (filled_path(&whole), filled_path(&out)),
+                ];
+                if finishing.confidence {
+                    files.push((confidence_path(&whole), confidence_path(&out)));
+                }
+                for (a, b) in &files {
                     let same = std::fs::read(a).unwrap() == std::fs::read(b).unwrap();
                     assert!(
                         same,
@@ -312,6 +362,35 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A work folder resumed from an earlier version has tiles without a confidence band: the
+    /// DSM is merged without a confidence sidecar, and one left by an earlier run is removed
+    /// rather than left beside a DSM it does not describe.
+    #[test]
+    fn tiles_without_confidence_give_no_sidecar() {
+        let dir = tempfile::tempdir().unwrap();
+        let work = dir.path().join("work");
+        let made = fabricate_tiles(&work, (100, 90), 64).unwrap();
+        let folder = TileFolder::new(&work);
+        let finishing = Finishing {
+            confidence: true,
+            ..Finishing::default()
+        };
+        let out = dir.path().join("dsm.tif");
+        merge_tiles(&finishing, &made.grid, &folder, &made.records, &out, 32).unwrap();
+        let confidence = camera::read_dsm(confidence_path(&out), None).unwrap().image;
+        let dsm = camera::read_dsm(filled_path(&out), None).unwrap().image;
+        // Measured cells (0 in the filled sidecar) have a confidence in [0, 1], the others none.
+        for (c, f) in confidence.data().iter().zip(dsm.data()) {
+            assert_eq!(*f == 0.0, c.is_finite(), "{c} {f}");
+            assert!(!c.is_finite() || (0.0..=1.0).contains(c), "{c}");
+        }
+        let mut older = made.records.clone();
+        let done = older.iter().position(|r| r.cells.is_some()).unwrap();
+        older[done].confidence = None;
+        merge_tiles(&finishing, &made.grid, &folder, &older, &out, 32).unwrap();
+        assert!(out.is_file() && !confidence_path(&out).exists());
     }
 
     /// The options' rays and reach become the finishing's, the reach never past the rays (a
@@ -349,6 +428,7 @@ mod tests {
                 reach: 16,
             }),
             median_filter: Some(7),
+            confidence: true,
         };
         assert_eq!(default.halo(), 43);
         let none = Finishing {
@@ -359,13 +439,23 @@ mod tests {
         assert_eq!(none.halo(), 0);
         let grid = DsmGrid::new(0.0, 0.0, 0.5, 50_000, 50_000, 32617).unwrap();
         let bytes = merge_memory(&grid, &default, MERGE_BLOCK_ROWS);
-        assert!(bytes < 1 << 30, "{bytes} bytes for 50,000² cells");
+        assert!(bytes < 3 << 29, "{bytes} bytes for 50,000² cells");
+        let without = Finishing {
+            confidence: false,
+            ..default
+        };
+        let bytes = merge_memory(&grid, &without, MERGE_BLOCK_ROWS);
+        assert!(
+            bytes < 1 << 30,
+            "{bytes} bytes for 50,000² cells without confidence"
+        );
         // A halo reaching past the grid: the whole grid is one block.
         let small = DsmGrid::new(0.0, 0.0, 0.5, 1000, 100, 32617).unwrap();
         let whole = merge_memory(&small, &default, MERGE_BLOCK_ROWS);
         assert_eq!(
             whole,
-            1000 * 100 * BLOCK_BYTES_PER_CELL + 2 * 1000 * 4 * (2 * 257 + 2 * 100)
+            1000 * 100 * (BLOCK_BYTES_PER_CELL + CONFIDENCE_BYTES_PER_CELL)
+                + 3 * 1000 * 4 * (2 * 257 + 2 * 100)
         );
     }
 }

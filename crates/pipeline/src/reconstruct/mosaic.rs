@@ -1,8 +1,9 @@
 //! Assembling the tiles' cells into one DSM grid. Neighbouring tiles can both put points in the
 //! cells along their shared edge; the merge keeps the highest of them for the benchmark's `max`
 //! gridding (exactly what one untiled pass gives) and, for the median gridding, the value of the
-//! tile that saw the cell with more points. A mosaic can hold a band of rows of the grid only,
-//! so that a DSM larger than memory is assembled a block at a time.
+//! tile that saw the cell with more points. A cell's confidence comes with its height, from the
+//! same tile. A mosaic can hold a band of rows of the grid only, so that a DSM larger than
+//! memory is assembled a block at a time.
 
 use std::ops::Range;
 use std::path::Path;
@@ -18,6 +19,8 @@ pub struct Mosaic {
     rows: Range<usize>,
     heights: Vec<f32>,
     counts: Vec<u16>,
+    /// The confidence of the tile each height came from, NaN where it had none.
+    confidence: Vec<f32>,
     gridding: Gridding,
 }
 
@@ -30,6 +33,7 @@ impl Mosaic {
             rows,
             heights: vec![f32::NAN; n],
             counts: vec![0; n],
+            confidence: vec![f32::NAN; n],
             gridding,
         }
     }
@@ -53,6 +57,7 @@ impl Mosaic {
                 };
                 if take {
                     *h = v;
+                    self.confidence[i] = part.confidence.as_ref().map_or(f32::NAN, |c| c[k]);
                 }
                 *m = match self.gridding {
                     Gridding::Max => m.saturating_add(n),
@@ -64,19 +69,32 @@ impl Mosaic {
 
     /// The gridded DSM of the mosaic's rows.
     pub fn into_image(self) -> Image {
-        Image::new(self.width, self.rows.len(), 1, self.heights).expect("one value per cell")
+        self.into_images().0
+    }
+
+    /// The gridded DSM of the mosaic's rows and the confidence of its cells.
+    pub fn into_images(self) -> (Image, Image) {
+        let (w, h) = (self.width, self.rows.len());
+        (
+            Image::new(w, h, 1, self.heights).expect("one value per cell"),
+            Image::new(w, h, 1, self.confidence).expect("one value per cell"),
+        )
     }
 }
 
-/// Writes a tile's cells (`tiles/<id>.tif`: band 1 heights, band 2 point counts).
+/// Writes a tile's cells (`tiles/<id>.tif`: band 1 heights, band 2 point counts, band 3 the
+/// confidence when the matcher gives one).
 pub fn write_part(path: &Path, part: &GridWindow) -> Result<()> {
-    let data = part
-        .heights
-        .iter()
-        .zip(&part.counts)
-        .flat_map(|(&h, &n)| [h, n as f32])
-        .collect();
-    let image = Image::new(part.width, part.height, 2, data)?;
+    let n = part.heights.len();
+    let bands = if part.confidence.is_some() { 3 } else { 2 };
+    let mut data = Vec::with_capacity(n * bands);
+    for k in 0..n {
+        data.extend([part.heights[k], part.counts[k] as f32]);
+        if let Some(c) = &part.confidence {
+            data.push(c[k]);
+        }
+    }
+    let image = Image::new(part.width, part.height, bands, data)?;
     write_geotiff(path, &image, &GeoTiffMeta::default())
         .with_context(|| format!("writing {}", path.display()))
 }
@@ -92,11 +110,12 @@ pub fn read_part(
     let context = || format!("reading the tile cells {}", path.display());
     let mut reader = TiffReader::open(path).with_context(context)?;
     let (col, row, width, height) = cells;
-    if reader.size() != (width, height) || reader.bands() != 2 {
+    let bands = reader.bands();
+    if reader.size() != (width, height) || !(2..=3).contains(&bands) {
         let (w, h) = reader.size();
         bail!(
-            "{}: expected {width}x{height} cells with 2 bands, found {w}x{h}x{}; delete the \
-             tile's record to recompute it",
+            "{}: expected {width}x{height} cells with 2 or 3 bands, found {w}x{h}x{}; delete \
+             the tile's record to recompute it",
             path.display(),
             reader.bands()
         );
@@ -114,8 +133,9 @@ pub fn read_part(
         row: first,
         width,
         height: last - first,
-        heights: d.iter().step_by(2).copied().collect(),
-        counts: d.iter().skip(1).step_by(2).map(|&n| n as u16).collect(),
+        heights: d.iter().step_by(bands).copied().collect(),
+        counts: d.iter().skip(1).step_by(bands).map(|&n| n as u16).collect(),
+        confidence: (bands == 3).then(|| d.iter().skip(2).step_by(3).copied().collect()),
     }))
 }
 
@@ -131,6 +151,7 @@ mod tests {
             height: 1,
             heights,
             counts,
+            confidence: None,
         }
     }
 
@@ -150,6 +171,19 @@ mod tests {
         med.add(&b);
         // Cell 1: a tie (1 point each) keeps the first tile; cell 2: a has 3 points to b's 2.
         assert_eq!(&med.into_image().data()[..3], &[1.0, 5.0, 2.0]);
+        // The confidence comes from the tile whose height is kept.
+        let a = GridWindow {
+            confidence: Some(vec![0.1, 0.2, 0.3]),
+            ..a
+        };
+        let mut max = Mosaic::new(&grid, 0..1, Gridding::Max);
+        max.add(&a);
+        max.add(&b);
+        let (h, c) = max.into_images();
+        assert_eq!(&h.data()[..3], &[1.0, 7.0, 2.0]);
+        assert_eq!(c.data()[0], 0.1);
+        assert!(c.data()[1].is_nan(), "b, which has none, won cell 1");
+        assert_eq!(c.data()[2], 0.3);
     }
 
     #[test]
@@ -163,10 +197,22 @@ mod tests {
             height: 2,
             heights: vec![1.5, f32::NAN, 3.0, 4.0],
             counts: vec![2, 0, 1, 7],
+            confidence: None,
         };
         write_part(&p, &a).unwrap();
         let b = read_part(&p, (3, 4, 2, 2), 0..10).unwrap().unwrap();
         assert_eq!(b.counts, a.counts);
+        assert_eq!(b.confidence, None);
+        // With a confidence band, it comes back with the heights.
+        let q = dir.path().join("r000_c001.tif");
+        let c = GridWindow {
+            confidence: Some(vec![0.5, f32::NAN, 0.25, 1.0]),
+            ..a.clone()
+        };
+        write_part(&q, &c).unwrap();
+        let d = read_part(&q, (3, 4, 2, 2), 5..9).unwrap().unwrap();
+        assert_eq!((d.heights, d.counts), (vec![3.0, 4.0], vec![1, 7]));
+        assert_eq!(d.confidence, Some(vec![0.25, 1.0]));
         assert_eq!(b.heights[0], 1.5);
         assert!(b.heights[1].is_nan());
         // Only the grid's row 5 (the window's second row); nothing on rows 6 and after.

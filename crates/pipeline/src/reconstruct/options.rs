@@ -167,8 +167,15 @@ impl ReconstructOptions {
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
         let overwrite = overwrite || work.join("scene.json").is_file();
         let sidecar = crate::dsm::filled_path(&self.output);
+        let confidence = crate::dsm::confidence_path(&self.output);
         crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite)?;
-        crate::outputs::check_output_file("-o (its _filled.tif)", &sidecar, &inputs, overwrite)
+        crate::outputs::check_output_file("-o (its _filled.tif)", &sidecar, &inputs, overwrite)?;
+        crate::outputs::check_output_file(
+            "-o (its _confidence.tif)",
+            &confidence,
+            &inputs,
+            overwrite,
+        )
     }
 
     /// How the cameras are named in messages: the JSON files, or the images' RPC tags.

@@ -8,12 +8,12 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use camera::rectify::{rectification_with, warp_nan, Rectification, Shear};
-use camera::{rasterize_window, triangulate_disparity, DsmGrid, GridWindow, Gridding, RpcModel};
+use camera::{triangulate_disparity, DsmGrid, GridWindow, Gridding, RpcModel};
 use raster::formats::{write_homographies, write_npy};
 use raster::{Homography, Image, Mask};
 use serde::{Deserialize, Serialize};
 
-use super::both_views::{both_views_cells, right_view_disparity, wants_both_views};
+use super::both_views::{both_views_cells, right_view_disparity, view_cells, wants_both_views};
 use super::plan::Tile;
 use super::raw::RawImage;
 use crate::dsm::valid_pixels;
@@ -90,6 +90,10 @@ pub struct TileRecord {
     /// [`super::both_views`]).
     #[serde(default)]
     pub both_views: Option<bool>,
+    /// Its cells carry the matcher's confidence (a third band of `tiles/<id>.tif`); absent in
+    /// the records of earlier versions, whose cells have none.
+    #[serde(default)]
+    pub confidence: Option<bool>,
     /// Share of the rectified left pixels with a disparity.
     pub matched: Option<f64>,
     /// Median row offset of the right view's matches of textured left patches, pixels
@@ -118,6 +122,7 @@ impl TileRecord {
             stretch: None,
             p2: None,
             both_views: None,
+            confidence: None,
             matched: None,
             vertical_parallax: None,
             points: 0,
@@ -207,6 +212,7 @@ pub fn run_tile(
     let cells = match match_and_grid(scene, tile, rect, &mut record) {
         Ok(Some(cells)) => {
             record.cells = Some((cells.col, cells.row, cells.width, cells.height));
+            record.confidence = Some(cells.confidence.is_some());
             Some(cells)
         }
         Ok(None) => {
@@ -283,7 +289,8 @@ fn match_and_grid(
         },
         || both_views.then(|| right_view_disparity(matcher, (&left, &right), rect.disparity_range)),
     );
-    let disparity = disparity?.disparity;
+    let matched = disparity?;
+    let (disparity, confidence) = (matched.disparity, matched.confidence);
     let right_disparity = right_disparity.transpose()?;
     let finite = disparity.data().iter().filter(|v| v.is_finite()).count();
     record.matched = Some(finite as f64 / disparity.data().len().max(1) as f64);
@@ -311,11 +318,17 @@ fn match_and_grid(
     )
     .context("triangulating")?;
     record.points = left_points.valid_count();
-    let Some(right_disparity) = right_disparity else {
-        return Ok(rasterize_window(&left_points, scene.grid, scene.gridding));
+    let Some((right_disparity, right_confidence)) = right_disparity else {
+        return Ok(view_cells(scene, &left_points, confidence.as_ref()));
     };
     record.both_views = Some(true);
-    both_views_cells(scene, tile, rect, &right_disparity, &left_points)
+    both_views_cells(
+        scene,
+        tile,
+        rect,
+        (&right_disparity, right_confidence.as_ref()),
+        (&left_points, confidence.as_ref()),
+    )
 }
 
 /// A tile's disparity per metre of altitude in raw pixels (before any stretch).
