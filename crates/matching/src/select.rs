@@ -354,6 +354,12 @@ mod tests {
         assert_eq!(m[0], 2.5); // {1,2,9,3}
     }
 
+    /// [`select`] with every pixel of both views valid.
+    fn select_all_valid(s: &[u16], dims: Dims, sel: &Selection) -> (Vec<f32>, Vec<f32>) {
+        let valid = vec![true; dims.width * dims.height];
+        select(s, dims, &valid, &valid, sel, &|| {})
+    }
+
     #[test]
     fn subpixel_fits_and_lr_check() {
         // One row, 4 pixels, 5 disparities, d_min = 0.
@@ -368,22 +374,14 @@ mod tests {
             height: 1,
             n_disp: n,
         };
-        let valid = vec![true; w];
         let run = |subpixel, lr| {
-            select(
-                &s,
-                dims,
-                &valid,
-                &valid,
-                &Selection {
-                    d_min: 0,
-                    lr_tolerance: lr,
-                    uniqueness: None,
-                    subpixel,
-                },
-                &|| {},
-            )
-            .0
+            let sel = Selection {
+                d_min: 0,
+                lr_tolerance: lr,
+                uniqueness: None,
+                subpixel,
+            };
+            select_all_valid(&s, dims, &sel).0
         };
         let p = run(Subpixel::Parabola, None);
         assert!((p[2] - (1.0 + 20.0 / 80.0)).abs() < 1e-6, "{}", p[2]);
@@ -415,21 +413,14 @@ mod tests {
             height: 1,
             n_disp: n,
         };
-        let valid = vec![true; 3];
         let run = |uniqueness| {
-            select(
-                &s,
-                dims,
-                &valid,
-                &valid,
-                &Selection {
-                    d_min: -2,
-                    lr_tolerance: None,
-                    uniqueness,
-                    subpixel: Subpixel::None,
-                },
-                &|| {},
-            )
+            let sel = Selection {
+                d_min: -2,
+                lr_tolerance: None,
+                uniqueness,
+                subpixel: Subpixel::None,
+            };
+            select_all_valid(&s, dims, &sel)
         };
         let (d, c) = run(None);
         assert_eq!(d[0], 0.0);

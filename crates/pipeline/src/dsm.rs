@@ -213,13 +213,15 @@ pub const FUSED_MEDIAN_CELLS: usize = 7;
 /// Suffix of `reconstruct`'s filled-cell sidecar, beside the DSM (`<stem>_filled.tif`).
 pub const FILLED_SUFFIX: &str = "_filled.tif";
 
+/// `<stem><suffix>` in the folder of `dsm`: where the files that describe a DSM go.
+pub fn sidecar_path(dsm: &Path, suffix: &str) -> PathBuf {
+    let stem = dsm.file_stem().map(|s| s.to_string_lossy().into_owned());
+    dsm.with_file_name(format!("{}{suffix}", stem.as_deref().unwrap_or("dsm")))
+}
+
 /// The filled-cell sidecar of `dsm`: `<stem>_filled.tif` in the DSM's folder.
 pub fn filled_path(dsm: &Path) -> PathBuf {
-    let stem = dsm.file_stem().map(|s| s.to_string_lossy().into_owned());
-    dsm.with_file_name(format!(
-        "{}{FILLED_SUFFIX}",
-        stem.as_deref().unwrap_or("dsm")
-    ))
+    sidecar_path(dsm, FILLED_SUFFIX)
 }
 
 /// Suffix of `reconstruct`'s confidence sidecar, beside the DSM (`<stem>_confidence.tif`).
@@ -230,11 +232,7 @@ pub const CONFIDENCE_SUFFIX: &str = "_confidence.tif";
 /// its best rival, in `[0, 1]`; NaN on filled and empty cells), what `reconstruct-many` weighs
 /// the pairs' heights by.
 pub fn confidence_path(dsm: &Path) -> PathBuf {
-    let stem = dsm.file_stem().map(|s| s.to_string_lossy().into_owned());
-    dsm.with_file_name(format!(
-        "{}{CONFIDENCE_SUFFIX}",
-        stem.as_deref().unwrap_or("dsm")
-    ))
+    sidecar_path(dsm, CONFIDENCE_SUFFIX)
 }
 
 /// Which cells of a finished DSM were measured and which invented, so that users and the fusion of

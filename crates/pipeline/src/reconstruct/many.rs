@@ -177,12 +177,7 @@ impl ReconstructManyOptions {
 
     /// `<output stem><suffix>` beside the output.
     pub fn sibling(&self, suffix: &str) -> PathBuf {
-        let stem = self
-            .output
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "dsm".into());
-        self.output.with_file_name(format!("{stem}{suffix}"))
+        crate::dsm::sidecar_path(&self.output, suffix)
     }
 }
 

@@ -193,9 +193,5 @@ impl ReconstructOptions {
 
 /// The default work folder of an output DSM: `out/dsm.tif` → `out/dsm_work`.
 pub fn default_work_dir(output: &Path) -> PathBuf {
-    let stem = output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "dsm".into());
-    output.with_file_name(format!("{stem}_work"))
+    crate::dsm::sidecar_path(output, "_work")
 }
