@@ -34,6 +34,10 @@ use crate::args::{parse_alt_range, GridArgs, GriddingArg, MatcherArgs, TilingArg
     confidence; NaN where none), OUTPUT_report.json, \
     and --work (default OUTPUT_work/: pairs/<pair>.tif, <pair>_confidence.tif and their tiles; \
     a rerun resumes).\n\n\
+    Clusters: --shard I/N (with --work on a shared file system) runs only this task's share of \
+    every pair's tiles (pair k's tiles at positions p with p + k ≡ I mod N) and stops; the same \
+    command without --shard then retries failed tiles, assembles the pairs and fuses them \
+    (docs/jobs/reconstruct-many-slurm.sh submits both on Slurm).\n\n\
     Exit codes: 0 all pairs done; 1 error before any work; 2 partial (some pairs failed, named; \
     the DSM fuses the others); 3 nothing produced.\n\n\
     Example (DFC2019 Jacksonville, ten acquisitions):\n  D=../shared/data/dfc2019-jax068-dev\n  \
@@ -112,6 +116,11 @@ pub struct ReconstructManyArgs {
     /// Height of a cell of a pair's DSM from its points.
     #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
     gridding: GriddingArg,
+    /// Run only this shard's tiles of every pair (array jobs sharing --work; pair k's tiles at
+    /// positions p with p + k ≡ I mod N), then stop; once every shard has finished, the same
+    /// command without --shard assembles the pairs and fuses them.
+    #[command(flatten)]
+    shard: crate::args::ShardArg,
     /// Each pair's tiles; the fusion runs by row blocks within the same memory budget.
     #[command(flatten)]
     tiling: TilingArgs,
@@ -138,7 +147,16 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
         eprintln!("warning: {w}");
     }
     s.check_produced()?;
-    let Some(f) = &s.fused else { return Ok(()) };
+    if let Some(shard) = &s.shard {
+        println!(
+            "shard {shard}: its tiles of {} pairs ran; once every shard has finished, run the same \
+             command without --shard to assemble the pairs and fuse them",
+            s.pairs.len()
+        );
+    }
+    let Some(f) = &s.fused else {
+        return partial_if_incomplete(&s);
+    };
     println!("{}", fused_line(&s, f));
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
@@ -146,6 +164,11 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     if let Some(r) = &s.report {
         println!("report: {}", r.display());
     }
+    partial_if_incomplete(&s)
+}
+
+/// Exit code 2 naming the pairs that failed or lost tiles.
+fn partial_if_incomplete(s: &ReconstructManySummary) -> Result<()> {
     let incomplete: Vec<String> = s
         .incomplete_pairs()
         .iter()
@@ -190,6 +213,7 @@ impl ReconstructManyArgs {
         o.gridding = self.gridding.into();
         (o.tile, o.collar) = (self.tiling.tile, self.tiling.collar);
         o.max_memory = self.tiling.max_memory_bytes()?;
+        o.shard = self.shard.shard;
         o.overwrite = crate::exit::overwrite();
         Ok(o)
     }
@@ -233,6 +257,9 @@ fn print_pairs(chosen: &[PairChoice], views: &[View], candidates: usize) {
 
 /// One pair's line: status, measured share, scores.
 fn pair_line(p: &seasonstereo::PairOutcome) -> String {
+    if p.status == seasonstereo::PairStatus::Tiles {
+        return format!("pair {} {}, {:.1} s", p.stem, p.status.word(), p.seconds);
+    }
     let scores = p.scores.as_ref().map_or(String::new(), |s| {
         format!(", vs truth: {}", crate::score::format_scores(s))
     });

@@ -51,6 +51,10 @@ const PLANS: &[(&str, Plan)] = &[
         Skip("needs a Slurm cluster: tests/jobs.rs runs it against a fake sbatch"),
     ),
     (
+        "bash docs/jobs/reconstruct-many-slurm.sh",
+        Skip("needs a Slurm cluster: reconstruct_many.rs runs its shards and fusion directly"),
+    ),
+    (
         "seasonstereo jobs status --work dsm_work",
         Skip("follows the Slurm submission above"),
     ),

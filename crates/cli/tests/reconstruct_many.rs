@@ -291,6 +291,72 @@ fn failed_pairs_exit_2_when_partial_and_3_when_nothing_is_produced() {
     assert!(!out.exists() && !dir.path().join("none_report.json").exists());
 }
 
+/// Two shards share the pairs' tiles (each pair has one tile: they spread by pair), then the run
+/// without a shard assembles and fuses them: the files of one unsharded run, byte for byte.
+#[test]
+fn shards_share_the_pairs_tiles_and_the_last_run_fuses_them() {
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let rpc_dir = d.join("rpcs/ba");
+    let images: Vec<String> = ["003", "004", "013"]
+        .iter()
+        .map(|id| image(&d, id))
+        .collect();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let work = dir.path().join(format!("{name}_work"));
+        let mut args: Vec<&str> = vec!["reconstruct-many"];
+        args.extend(images.iter().map(String::as_str));
+        args.extend(["--rpc-dir", rpc_dir.to_str().unwrap(), "--pairs", "2"]);
+        args.extend([
+            "--work",
+            work.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        args.extend(extra);
+        let o = seasonstereo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    run("one.tif", &[]);
+    // Pairs whose tile is finished in the shared work folder.
+    let finished = || {
+        let pairs = dir.path().join("sharded.tif_work/pairs");
+        std::fs::read_dir(pairs).map_or(0, |entries| {
+            entries
+                .flatten()
+                .filter(|e| e.path().join("tiles/r000_c000.json").is_file())
+                .count()
+        })
+    };
+    let first = run("sharded.tif", &["--shard", "0/2"]);
+    assert!(
+        first.contains("shard 0/2: its tiles of 2 pairs ran"),
+        "{first}"
+    );
+    assert!(
+        !dir.path().join("sharded.tif").exists(),
+        "a shard fuses nothing"
+    );
+    assert_eq!(finished(), 1, "shard 0 ran one pair's tile");
+    run("sharded.tif", &["--shard", "1/2"]);
+    assert_eq!(finished(), 2);
+    let last = run("sharded.tif", &[]);
+    assert!(last.contains("wrote"), "{last}");
+    for suffix in [".tif", "_confidence.tif", "_count.tif", "_spread.tif"] {
+        let (a, b) = (
+            dir.path().join(format!("one{suffix}")),
+            dir.path().join(format!("sharded{suffix}")),
+        );
+        assert!(
+            std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+            "{}",
+            a.display()
+        );
+    }
+}
+
 fn bytes(paths: &[PathBuf]) -> Vec<Vec<u8>> {
     paths.iter().map(|p| std::fs::read(p).unwrap()).collect()
 }

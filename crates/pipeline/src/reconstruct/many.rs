@@ -104,6 +104,10 @@ pub struct ReconstructManyOptions {
     pub collar: usize,
     /// Memory budget of the process, bytes (each pair's tiles, then the fusion).
     pub max_memory: u64,
+    /// This process's share of every pair's tiles (array jobs sharing `work_dir`): a sharded
+    /// run only runs its tiles ([`shard_of_pair`]); the run without a shard (`Shard::ALL`)
+    /// assembles the pairs and fuses them.
+    pub shard: Shard,
     /// Replace an existing DSM, count, spread or report (atomically). A rerun into the work
     /// folder of an earlier run of the same output replaces them without it.
     pub overwrite: bool,
@@ -164,6 +168,7 @@ impl ReconstructManyOptions {
             tile: 1024,
             collar: 64,
             max_memory: 2 << 30,
+            shard: Shard::ALL,
             overwrite: false,
         }
     }
@@ -191,6 +196,8 @@ pub enum PairStatus {
     Partial,
     /// No DSM, or one without a measured cell.
     Failed,
+    /// A sharded run's tiles of the pair finished; the run without a shard assembles it.
+    Tiles,
 }
 
 impl PairStatus {
@@ -200,6 +207,7 @@ impl PairStatus {
             PairStatus::Done => "done",
             PairStatus::Partial => "partial (tiles failed)",
             PairStatus::Failed => "FAILED",
+            PairStatus::Tiles => "this shard's tiles done",
         }
     }
 }
@@ -256,6 +264,8 @@ pub struct ReconstructManySummary {
     pub scores: Option<DsmScores>,
     pub work: PathBuf,
     pub report: Option<PathBuf>,
+    /// `i/n` of a sharded run (its tiles only); `None` for the run that fuses.
+    pub shard: Option<String>,
     pub seconds: f64,
 }
 
@@ -264,7 +274,7 @@ impl ReconstructManySummary {
     pub fn incomplete_pairs(&self) -> Vec<&PairOutcome> {
         self.pairs
             .iter()
-            .filter(|p| p.status != PairStatus::Done)
+            .filter(|p| !matches!(p.status, PairStatus::Done | PairStatus::Tiles))
             .collect()
     }
 
@@ -291,7 +301,7 @@ impl ReconstructManySummary {
     /// [`crate::outputs::Incomplete::Nothing`] when pairs ran and none produced a DSM (a dry
     /// run produces nothing by design and passes): every caller ends such a run as a failure.
     pub fn check_produced(&self) -> Result<()> {
-        if self.pairs.is_empty() || self.fused.is_some() {
+        if self.pairs.is_empty() || self.fused.is_some() || self.shard.is_some() {
             return Ok(());
         }
         Err(crate::outputs::Incomplete::Nothing {
@@ -315,6 +325,11 @@ pub fn reconstruct_many(
     }
     let rows = fusion_rows(&grids.fused, summary.chosen.len(), opts.max_memory)?;
     run_pairs(opts, &mut summary, &grids, progress);
+    if opts.shard != Shard::ALL {
+        summary.shard = Some(format!("{}/{}", opts.shard.index, opts.shard.count));
+        summary.seconds = start.elapsed().as_secs_f64();
+        return Ok(summary);
+    }
     fuse_pairs(opts, &mut summary, &grids.fused, rows, progress)?;
     summary.seconds = start.elapsed().as_secs_f64();
     if summary.fused.is_some() {
@@ -354,6 +369,7 @@ fn plan(opts: &ReconstructManyOptions) -> Result<(ReconstructManySummary, Grids)
         scores: None,
         work,
         report: None,
+        shard: None,
         seconds: 0.0,
     };
     Ok((summary, Grids { fused, pairs }))
@@ -374,7 +390,11 @@ fn run_pairs(
             total: summary.chosen.len(),
             steps: std::sync::atomic::AtomicUsize::new(1),
         };
-        let pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
+        let mut pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
+        if opts.shard != Shard::ALL {
+            pair_opts.shard = shard_of_pair(opts.shard, k);
+            pair_opts.tiles_only = true;
+        }
         summary
             .pairs
             .push(run_pair(&pair_opts, &grids.fused, &pair.stem, &shown));
@@ -504,6 +524,17 @@ impl Progress for PairProgress<'_> {
     }
 }
 
+/// The shard of pair `k`'s tiles that the run's `shard` takes: its tiles at positions `p` with
+/// `p + k ≡ i (mod n)`, so that pairs of a single tile (or fewer tiles than shards) still
+/// spread over the shards instead of all landing on shard 0.
+pub fn shard_of_pair(shard: Shard, k: usize) -> Shard {
+    let n = shard.count;
+    Shard {
+        index: (shard.index + n - k % n) % n,
+        count: n,
+    }
+}
+
 /// The options of one pair's tiled reconstruction.
 fn pair_options(
     opts: &ReconstructManyOptions,
@@ -574,6 +605,13 @@ fn run_pair(
                 .map(|r| r.tile.id.clone())
                 .collect();
             match s.dsm {
+                None if o.tiles_only => {
+                    out.status = if out.failed_tiles.is_empty() {
+                        PairStatus::Tiles
+                    } else {
+                        PairStatus::Partial
+                    };
+                }
                 Some(d) if d.measured_cells > 0 => {
                     out.measured_cells = d.measured_cells;
                     out.measured_share =
@@ -950,6 +988,24 @@ mod tests {
         let m: Vec<usize> = [1, 2, 3, 8, 12, 16, 20].map(auto_min_support).to_vec();
         assert_eq!(m, vec![1, 2, 2, 2, 3, 4, 5]);
         assert!((auto_min_confidence(12) - 1.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn every_tile_of_every_pair_lands_on_exactly_one_shard_and_single_tiles_spread() {
+        for n in 1..5 {
+            for k in 0..7 {
+                for p in 0..9 {
+                    let owners = (0..n)
+                        .filter(|&i| shard_of_pair(Shard { index: i, count: n }, k).contains(p))
+                        .count();
+                    assert_eq!(owners, 1, "{n} shards, pair {k}, tile {p}");
+                }
+            }
+        }
+        // Three pairs of one tile each over three shards: one pair each.
+        let owner =
+            |k| (0..3).find(|&i| shard_of_pair(Shard { index: i, count: 3 }, k).contains(0));
+        assert_eq!([0, 1, 2].map(owner), [Some(0), Some(1), Some(2)]);
     }
 
     #[test]
