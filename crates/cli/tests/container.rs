@@ -59,6 +59,7 @@ fn every_job_runs_the_image_the_kustomization_names() {
     let mut jobs = 0;
     for manifest in [
         "docs/jobs/reconstruct-k8s.yaml",
+        "docs/jobs/reconstruct-many-k8s.yaml",
         "docs/jobs/k8s-indexed-job.yaml",
     ] {
         assert!(kustomization.contains(&format!("- {}", &manifest["docs/jobs/".len()..])));
@@ -75,5 +76,8 @@ fn every_job_runs_the_image_the_kustomization_names() {
             jobs += (image == "seasonstereo") as usize;
         }
     }
-    assert!(jobs >= 3, "tile pods, merge and dataset jobs: {jobs}");
+    assert!(
+        jobs >= 5,
+        "tile pods, merge, many-date tiles and fusion, dataset: {jobs}"
+    );
 }
