@@ -186,7 +186,9 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
     ``<out>_report.json`` beside it). Options, with the command's defaults: ``pairs``,
     ``dry_run`` (choose the pairs, write nothing), ``cluster_tolerance``, ``min_support``,
     ``min_confidence``, ``register``, ``pair_weights``, ``fill_holes``,
-    ``median_filter``, ``pair_median_filter``, ``single_view``, ``work``, ``like``, ``resolution``, ``epsg``,
+    ``median_filter``, ``pair_median_filter``, ``single_view``, ``work``, ``shard`` (``"I/N"``:
+    only this task's share of the pairs' tiles, no fusion; the call without it fuses), ``like``,
+    ``resolution``, ``epsg``,
     ``truth``,
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
     call's worker threads; default every core) and the matcher's options of :func:`predict`.

@@ -75,6 +75,9 @@ fn many_options(
     o.truth = k.path("truth")?;
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
+    if let Some(shard) = k.take::<String>("shard")? {
+        o.shard = shard.parse().map_err(value_error)?;
+    }
     Ok(o)
 }
 

@@ -41,3 +41,21 @@ def test_one_image_is_refused(dev, tmp_path):
     with pytest.raises(ValueError):
         seasonstereo.reconstruct_many([dev / "images" / "JAX_068_013_RGB.tif"],
                                       dev / "rpcs" / "ba", out=tmp_path / "dsm.tif")
+
+
+def test_shards_then_the_unsharded_call_give_one_call_s_dsm(dev, tmp_path):
+    images = [dev / "images" / f"JAX_068_{d}_RGB.tif" for d in DATES]
+    rpcs = dev / "rpcs" / "ba"
+    seasonstereo.reconstruct_many(images, rpcs, out=tmp_path / "one" / "dsm.tif", pairs=2)
+    work = tmp_path / "shared_work"
+    for i in range(2):
+        s = seasonstereo.reconstruct_many(images, rpcs, out=tmp_path / "sharded" / "dsm.tif",
+                                          pairs=2, work=work, shard=f"{i}/2")
+        assert s["shard"] == f"{i}/2" and s["fused"] is None
+        assert all(p["status"] == "tiles" for p in s["pairs"])
+    assert not (tmp_path / "sharded" / "dsm.tif").exists()
+    s = seasonstereo.reconstruct_many(images, rpcs, out=tmp_path / "sharded" / "dsm.tif",
+                                      pairs=2, work=work)
+    assert s["shard"] is None and s["fused"] is not None
+    assert filecmp.cmp(tmp_path / "one" / "dsm.tif", tmp_path / "sharded" / "dsm.tif",
+                       shallow=False)
