@@ -253,22 +253,25 @@ fn a_six_date_world_fuses_better_than_its_best_pair() {
     }
 }
 
+/// `reconstruct-many` of dev dates 003, 004 and 013 with their cameras, the best 2 pairs.
+fn two_pairs_of_three_dates(d: &Path) -> Vec<String> {
+    let mut args = vec!["reconstruct-many".to_string()];
+    args.extend(["003", "004", "013"].iter().map(|id| image(d, id)));
+    let rpc_dir = d.join("rpcs/ba").to_str().unwrap().to_string();
+    args.extend(["--rpc-dir".into(), rpc_dir, "--pairs".into(), "2".into()]);
+    args
+}
+
 /// Pairs that fail are named: exit 2 when the others give a DSM, 3 (nothing written) when none
 /// does. A memory budget that fits one pair's tile and not the other's makes them fail.
 #[test]
 fn failed_pairs_exit_2_when_partial_and_3_when_nothing_is_produced() {
     let d = testdata::require!("data/dfc2019-jax068-dev");
     let dir = tempfile::tempdir().unwrap();
-    let rpc_dir = d.join("rpcs/ba");
-    let images: Vec<String> = ["003", "004", "013"]
-        .iter()
-        .map(|id| image(&d, id))
-        .collect();
+    let base = two_pairs_of_three_dates(&d);
     let run = |memory: &str, name: &str| {
         let out = dir.path().join(name);
-        let mut args: Vec<&str> = vec!["reconstruct-many"];
-        args.extend(images.iter().map(String::as_str));
-        args.extend(["--rpc-dir", rpc_dir.to_str().unwrap(), "--pairs", "2"]);
+        let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
         args.extend(["--max-memory", memory, "-o", out.to_str().unwrap()]);
         (seasonstereo(&args), out)
     };
@@ -297,17 +300,11 @@ fn failed_pairs_exit_2_when_partial_and_3_when_nothing_is_produced() {
 fn shards_share_the_pairs_tiles_and_the_last_run_fuses_them() {
     let d = testdata::require!("data/dfc2019-jax068-dev");
     let dir = tempfile::tempdir().unwrap();
-    let rpc_dir = d.join("rpcs/ba");
-    let images: Vec<String> = ["003", "004", "013"]
-        .iter()
-        .map(|id| image(&d, id))
-        .collect();
+    let base = two_pairs_of_three_dates(&d);
     let run = |name: &str, extra: &[&str]| {
         let out = dir.path().join(name);
         let work = dir.path().join(format!("{name}_work"));
-        let mut args: Vec<&str> = vec!["reconstruct-many"];
-        args.extend(images.iter().map(String::as_str));
-        args.extend(["--rpc-dir", rpc_dir.to_str().unwrap(), "--pairs", "2"]);
+        let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
         args.extend([
             "--work",
             work.to_str().unwrap(),

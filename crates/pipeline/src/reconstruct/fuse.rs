@@ -385,15 +385,15 @@ pub fn fuse_files(
     progress: &dyn Progress,
 ) -> Result<Fused> {
     let (w, h) = (grid.width, grid.height);
+    let with_confidence = !layers.is_empty() && layers.iter().all(|l| l.confidence.is_some());
     let mut readers = Vec::with_capacity(layers.len());
     let mut confidence_readers = Vec::with_capacity(layers.len());
     for layer in layers {
         readers.push(open_layer(&layer.dsm, (w, h))?);
-        if let Some(c) = &layer.confidence {
+        if let (true, Some(c)) = (with_confidence, &layer.confidence) {
             confidence_readers.push(open_layer(c, (w, h))?);
         }
     }
-    let with_confidence = !layers.is_empty() && confidence_readers.len() == layers.len();
     let rows = rows_per_block.max(1);
     let blocks = h.div_ceil(rows);
     let mut out = Fused::with_capacity(w * h);

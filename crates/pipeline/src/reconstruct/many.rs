@@ -434,13 +434,9 @@ fn fuse_pairs(
             shift,
         });
     }
+    // `fuse_files` uses the confidences only when every layer has one (a layer without would
+    // weigh 1 and be favoured); the rules follow the same condition.
     let confident = layers.iter().all(|l| l.confidence.is_some());
-    if !confident {
-        // A layer without confidence weighs 1: mixing would favour it.
-        for l in &mut layers {
-            l.confidence = None;
-        }
-    }
     let params = fusion_params(opts, layers.len(), confident);
     summary.fusion = Some(params);
     let equal = vec![1.0; layers.len()];

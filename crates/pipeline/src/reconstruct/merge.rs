@@ -185,16 +185,15 @@ pub fn merge_tiles(
             finishing.median_filter,
         )?;
         let core = (block.start - window.start)..(block.end - window.start);
-        let confidence = rows_of(&confidence, core.clone());
+        if let Some(out) = &mut confidence_out {
+            out.write(&rows_of(&confidence, core.clone()))?;
+        }
         let (measured, finished) = (rows_of(&measured, core.clone()), rows_of(&finished, core));
         measured_cells += finite(&measured);
         filled_cells += finite(&finished);
         let filled = filled_mask(&measured, &finished)?;
         dsm_out.write(&finished)?;
         filled_out.write(&filled)?;
-        if let Some(out) = &mut confidence_out {
-            out.write(&confidence)?;
-        }
     }
     dsm_out.finish()?;
     filled_out.finish()?;
