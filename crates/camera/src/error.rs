@@ -11,6 +11,14 @@ pub enum CameraError {
         key: String,
         message: String,
     },
+    /// Acquisition metadata (an `.IMD`, a DIMAP `DIM_*.XML`, a TIFF's GDAL metadata) that could
+    /// not be read: `origin` is the file, `key` the offending entry.
+    #[error("{origin}: metadata key {key:?}: {message}")]
+    Metadata {
+        origin: String,
+        key: String,
+        message: String,
+    },
     /// A raster could not be read or written.
     #[error(transparent)]
     Raster(#[from] RasterError),

@@ -1,5 +1,6 @@
-//! Satellite camera geometry: RPC camera models, UTM coordinates, the benchmark's iterative
-//! triangulation of rectified disparities and the max-per-cell DSM rasterisation.
+//! Satellite camera geometry: RPC camera models (with the vendor sidecars they are delivered
+//! in), UTM coordinates, the benchmark's iterative triangulation of rectified disparities and the
+//! max-per-cell DSM rasterisation.
 //!
 //! Everything here follows the released evaluation code (rpcm's localisation, s2p's altitude
 //! iteration, floor-and-max gridding), so altitude errors computed with it are comparable to the
@@ -12,6 +13,7 @@ pub mod rectify;
 pub mod rpc;
 pub mod triangulate;
 pub mod utm;
+pub mod vendor;
 
 pub use dsm::{
     dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window,
@@ -22,6 +24,10 @@ pub use error::CameraError;
 pub use rpc::RpcModel;
 pub use triangulate::{altitude, evaluation_mask, triangulate_disparity, Points};
 pub use utm::UtmZone;
+pub use vendor::{
+    camera_beside, find_camera_file, find_metadata_file, metadata_of, read_camera_file,
+    read_metadata_file, Acquisition,
+};
 
 /// Result type of this crate.
 pub type Result<T, E = CameraError> = std::result::Result<T, E>;

@@ -311,7 +311,7 @@ impl RpcModel {
         })
     }
 
-    fn check(&self, origin: &str) -> Result<()> {
+    pub(crate) fn check(&self, origin: &str) -> Result<()> {
         let scalars = [
             ("row_offset", self.row_offset, false),
             ("col_offset", self.col_offset, false),

@@ -17,6 +17,9 @@ use super::support::{alloc_samples, checked_samples, no_panic, write_atomically}
 use crate::{Image, RasterError, Result};
 
 pub(super) const TAG_RPC: u16 = 50844;
+/// GDAL's metadata tag: an XML `<GDALMetadata>` of name/value items (NITF header fields and the
+/// like of a converted satellite image).
+const TAG_GDAL_METADATA: u16 = 42112;
 const KEY_MODEL_TYPE: u16 = 1024;
 const KEY_RASTER_TYPE: u16 = 1025;
 const KEY_GEOGRAPHIC_TYPE: u16 = 2048;
@@ -210,10 +213,13 @@ pub struct TiffReader {
     pub nodata: Option<f64>,
     /// The RPC camera model of a satellite image.
     pub rpc: Option<RpcTag>,
+    /// The text of GDAL's metadata tag 42112 (`<GDALMetadata>…`), as stored; the camera crate
+    /// reads acquisition dates from it.
+    pub gdal_metadata: Option<String>,
 }
 
 impl TiffReader {
-    /// Opens `path` and reads its header, georeferencing, nodata and RPC tags.
+    /// Opens `path` and reads its header, georeferencing, nodata, RPC and GDAL metadata tags.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let file = File::open(path).map_err(|e| RasterError::io(path, e))?;
@@ -239,6 +245,10 @@ impl TiffReader {
                 }
                 None => None,
             };
+            let gdal_metadata = match find(path, &mut dec, Tag::Unknown(TAG_GDAL_METADATA))? {
+                Some(v) => Some(ascii_tag(path, v)?),
+                None => None,
+            };
             Ok(TiffReader {
                 path: path.to_path_buf(),
                 dec,
@@ -247,6 +257,7 @@ impl TiffReader {
                 georef,
                 nodata,
                 rpc,
+                gdal_metadata,
             })
         })
     }
@@ -354,8 +365,14 @@ fn find(path: &Path, dec: &mut Dec, tag: Tag) -> Result<Option<tiff::decoder::if
     dec.find_tag(tag).map_err(|e| tiff_err(path, e))
 }
 
-fn parse_nodata(path: &Path, v: tiff::decoder::ifd::Value) -> Result<f64> {
+/// An ASCII tag's text without its NUL terminator(s).
+fn ascii_tag(path: &Path, v: tiff::decoder::ifd::Value) -> Result<String> {
     let s = v.into_string().map_err(|e| tiff_err(path, e))?;
+    Ok(s.trim_end_matches('\0').to_string())
+}
+
+fn parse_nodata(path: &Path, v: tiff::decoder::ifd::Value) -> Result<f64> {
+    let s = ascii_tag(path, v)?;
     let s = s.trim_matches(|c: char| c == '\0' || c.is_whitespace());
     s.parse::<f64>()
         .map_err(|_| RasterError::format(path, format!("unreadable GDAL_NODATA value '{s}'")))
@@ -692,6 +709,33 @@ mod tests {
         assert_eq!(r.samp_den[19], 91.0);
         assert_eq!(r.to_coefficients(), c);
         assert!(RpcTag::from_coefficients(&c[..90]).is_err());
+    }
+
+    #[test]
+    fn gdal_metadata_tag_is_kept() {
+        use tiff::encoder::colortype::Gray8;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("md.tif");
+        let xml =
+            "<GDALMetadata>\n  <Item name=\"NITF_IDATIM\">20141214160402</Item>\n</GDALMetadata>";
+        {
+            let file = File::create(&path).unwrap();
+            let mut enc = TiffEncoder::new(file).unwrap();
+            let mut im = enc.new_image::<Gray8>(2, 2).unwrap();
+            im.encoder()
+                .write_tag(Tag::Unknown(TAG_GDAL_METADATA), xml)
+                .unwrap();
+            im.write_data(&[1u8, 2, 3, 4]).unwrap();
+        }
+        let reader = TiffReader::open(&path).unwrap();
+        assert_eq!(reader.gdal_metadata.as_deref(), Some(xml));
+        assert!(reader.rpc.is_none());
+        // The files written here carry none.
+        let out = dir.path().join("out.tif");
+        let mut reader = reader;
+        let img = reader.read_window(0, 0, 2, 2).unwrap();
+        write_geotiff(&out, &img, &reader.meta()).unwrap();
+        assert_eq!(TiffReader::open(&out).unwrap().gdal_metadata, None);
     }
 
     #[test]
