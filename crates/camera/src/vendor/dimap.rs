@@ -50,7 +50,7 @@ fn read_leaves(
 
 /// Reads a DIMAP `RPC_*.XML` camera, its image offsets made 0-based.
 pub fn read_dimap_rpc(path: &Path) -> Result<RpcModel> {
-    let leaves = read_leaves(path, |o, k, m| rpc_error(o, k, m))?;
+    let leaves = read_leaves(path, rpc_error)?;
     dimap_rpc_from_leaves(&leaves, &path.display().to_string())
 }
 
@@ -124,7 +124,7 @@ pub(super) fn dimap_rpc_from_leaves(leaves: &[Leaf], origin: &str) -> Result<Rpc
 /// satellite angles are left out: DIMAP gives viewing incidence and azimuth in conventions this
 /// reader does not convert.
 pub fn read_dimap_metadata(path: &Path) -> Result<Acquisition> {
-    let leaves = read_leaves(path, |o, k, m| metadata_error(o, k, m))?;
+    let leaves = read_leaves(path, metadata_error)?;
     dimap_metadata_from_leaves(&leaves, path)
 }
 
