@@ -23,10 +23,20 @@ use crate::stage::{read_json, write_text};
 /// The record's name in the work folder.
 pub const RECORD: &str = "run.json";
 
-/// Entries of a work folder that are not a run's content: the record, and the job files that a
-/// cluster submission writes before its first task runs (`jobs/`, kept when the folder is
-/// cleared).
-const NOT_CONTENT: [&str; 2] = [RECORD, "jobs"];
+/// The entries a run writes in its work folder (`reconstruct`'s scene, tiles and kept
+/// intermediates, `reconstruct-many`'s pairs): its content, what clearing removes. Anything else
+/// is left alone: the job files a cluster submission writes before its first task (`jobs/`), a
+/// user's own files in a folder given to `--work`.
+const RUN_ENTRIES: [&str; 8] = [
+    "scene.json",
+    "tiles",
+    "pairs",
+    "L",
+    "R",
+    "homography",
+    "rectify",
+    "disparity",
+];
 
 /// Bytes of an input's head that identify it with its size: a TIFF's header and first strips, a
 /// camera JSON whole. A hash of the head, not the modification time, so that copying or
@@ -216,15 +226,13 @@ enum Relation {
     Other(String),
 }
 
-/// The entries of `work` that are a run's content.
+/// The entries of `work` that are a run's content ([`RUN_ENTRIES`]).
 fn content(work: &Path) -> Vec<PathBuf> {
-    std::fs::read_dir(work).map_or(Vec::new(), |entries| {
-        entries
-            .flatten()
-            .filter(|e| !NOT_CONTENT.iter().any(|n| e.file_name() == *n))
-            .map(|e| e.path())
-            .collect()
-    })
+    RUN_ENTRIES
+        .iter()
+        .map(|name| work.join(name))
+        .filter(|p| p.exists() || p.is_symlink())
+        .collect()
 }
 
 fn relation(work: &Path, run: &RunRecord) -> Result<Relation> {
@@ -382,8 +390,8 @@ fn also(others: &[String]) -> String {
     }
 }
 
-/// Empties `work` of another run's content (its job files stay), refusing when it holds one of
-/// `inputs`.
+/// Removes another run's content from `work` ([`RUN_ENTRIES`] and the record; other files
+/// stay), refusing when the folder holds one of `inputs`.
 fn clear(work: &Path, inputs: &[&Path]) -> Result<()> {
     crate::outputs::check_output_folder("--work", work, inputs, true)?;
     let record = work.join(RECORD);
@@ -481,6 +489,7 @@ mod tests {
         let mut o = options(dir.path());
         let work = o.work();
         std::fs::create_dir_all(work.join("jobs")).unwrap();
+        std::fs::write(work.join("notes.txt"), b"mine").unwrap();
         let run = RunRecord::of_reconstruct(&o);
         check(&work, &run, &[], &[], false).unwrap();
         std::fs::write(work.join("scene.json"), b"{}").unwrap();
@@ -495,5 +504,9 @@ mod tests {
         std::fs::remove_file(&camera).unwrap();
         check(&work, &run, &[], &[], true).unwrap();
         assert!(work.join("jobs").is_dir() && !work.join("scene.json").exists());
+        assert!(
+            work.join("notes.txt").is_file(),
+            "a user's file is not a run's"
+        );
     }
 }
