@@ -101,6 +101,17 @@ pub fn read_camera(path: &Path) -> Result<RpcModel> {
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    if ["rpb", "rpc", "txt", "xml"]
+        .iter()
+        .any(|e| ext.eq_ignore_ascii_case(e))
+    {
+        bail!(
+            "{}: a camera is read from a SatNeRF/rpcm JSON (.json) or a GeoTIFF carrying the RPC \
+             tag, not from a .{ext} file: convert it to rpcm JSON, or give the image itself",
+            path.display()
+        );
+    }
     let rpc = if is_json {
         RpcModel::read_rpcm_json(path)
     } else {

@@ -878,12 +878,6 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
         check_output_file("-o", out, &inputs, true)?;
     }
     check_output_folder("--work", &opts.work_dir(), &inputs, false)?;
-    // A rerun of the same run resumes its work folder and rewrites its products; a dry run
-    // writes nothing.
-    if !opts.dry_run {
-        let run = crate::provenance::RunRecord::of_many(opts);
-        crate::provenance::check(&opts.work_dir(), &run, &outputs, &inputs, opts.overwrite)?;
-    }
     let canon = |p: &Path| std::fs::canonicalize(p).ok();
     if let (Some(t), GridChoice::Like(l)) = (&opts.truth, &opts.grid) {
         if canon(t) != canon(l) {
@@ -894,6 +888,12 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
         }
     } else if opts.truth.is_some() {
         bail!("--truth needs --like on the same file (the scores need its grid)");
+    }
+    // Last, as it may clear another run's work folder (with --overwrite): a rerun of the same
+    // run resumes it and rewrites its products; a dry run writes nothing.
+    if !opts.dry_run {
+        let run = crate::provenance::RunRecord::of_many(opts);
+        crate::provenance::check(&opts.work_dir(), &run, &outputs, &inputs, opts.overwrite)?;
     }
     Ok(())
 }
