@@ -2,7 +2,8 @@
 //! names the command, its inputs (resolved path, size and a hash of the file's head) and every
 //! option that changes the result. A rerun that matches resumes and may rewrite its own DSM;
 //! anything else (another command, other inputs, other settings, a folder of an earlier version
-//! without the record) is refused before any work unless `--overwrite`, which clears the folder.
+//! without the record) is refused before any work unless `--overwrite`, which clears the run's
+//! entries from the folder (never the user's other files, never an input).
 //! The options split in two: those the folder's content (tiles, pairs' DSMs) depends on, and the
 //! finishing of the DSM (hole filling, median, fusion rules): a rerun with other finishing reuses
 //! the folder but replaces the DSM only with `--overwrite`.
@@ -98,8 +99,8 @@ impl InputFile {
 
 /// FNV-1a, 64 bits: stable across builds and platforms, as a record read back later must be.
 fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h: u64, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
     })
 }
 
@@ -117,7 +118,7 @@ fn grid_json(grid: &GridChoice) -> Value {
 
 fn grid_input(grid: &GridChoice) -> Option<&Path> {
     match grid {
-        GridChoice::Like(p) => Some(p),
+        GridChoice::Like(p) => Some(p.as_path()),
         GridChoice::Resolution { .. } => None,
     }
 }
