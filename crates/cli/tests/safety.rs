@@ -583,21 +583,62 @@ fn many(scene: &Scene, output: &Path, extra: &[&str]) -> Output {
     seasonstereo(&args)
 }
 
-/// Issue 51, defect 1: `reconstruct-many` onto the DSM of a `reconstruct` run (whose work folder
-/// it would take for its own) exits 1 before any work, naming the DSM and the other command, and
-/// every existing file stays byte-identical. With `--overwrite` the other run's work folder is
-/// cleared and no sidecar of the old DSM stays beside the new one.
+/// Issue 51, defect 1: `reconstruct-many` of three dates (the best 2 pairs) onto the DSM of a
+/// `reconstruct` run, whose work folder it would take for its own, exits 1 before any work,
+/// naming the DSM and the other command, and every existing file stays byte-identical. With
+/// `--overwrite` the other run's work folder is cleared and no sidecar of the old DSM stays
+/// beside the new one.
 #[test]
 fn another_command_onto_an_existing_dsm_is_refused_and_every_file_kept() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = Scene::new(dir.path(), 256);
+    let world = dir.path().join("world");
+    let o = seasonstereo(&[
+        "world",
+        "--dates",
+        "--size",
+        "384",
+        "-o",
+        world.to_str().unwrap(),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let image = |k: usize| s(&world.join(format!("raw/WORLD_1_D{k}.tif")));
+    let camera = |k: usize| s(&world.join(format!("rpc/WORLD_1_D{k}.json")));
     let out_dir = dir.path().join("out");
     let out = out_dir.join("dsm.tif");
-    let o = scene.reconstruct(&out, &[]);
+    let o = seasonstereo(&[
+        "reconstruct",
+        &image(1),
+        &image(2),
+        "--rpc-left",
+        &camera(1),
+        "--rpc-right",
+        &camera(2),
+        "-o",
+        &s(&out),
+    ]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     assert!(out_dir.join("dsm_filled.tif").is_file());
     let before = tree(&out_dir);
-    let o = many(&scene, &out, &[]);
+    let rpc_dir = s(&world.join("rpc"));
+    let (a, b, c) = (image(1), image(2), image(3));
+    let out_arg = s(&out);
+    let many = |extra: &[&str]| {
+        let mut args: Vec<&str> = vec![
+            "reconstruct-many",
+            &a,
+            &b,
+            &c,
+            "--rpc-dir",
+            &rpc_dir,
+            "--pairs",
+            "2",
+            "-o",
+            &out_arg,
+        ];
+        args.extend_from_slice(extra);
+        seasonstereo(&args)
+    };
+    let o = many(&[]);
     let e = stderr(&o);
     assert_eq!(code(&o), 1, "{e}\n{}", stdout(&o));
     assert!(
@@ -610,7 +651,7 @@ fn another_command_onto_an_existing_dsm_is_refused_and_every_file_kept() {
     assert_plain(&e);
     assert_same_tree(&out_dir, &before);
 
-    let o = many(&scene, &out, &["--overwrite"]);
+    let o = many(&["--overwrite"]);
     assert_eq!(code(&o), 0, "{}\n{}", stderr(&o), stdout(&o));
     assert!(
         !out_dir.join("dsm_filled.tif").exists(),
@@ -625,13 +666,17 @@ fn another_command_onto_an_existing_dsm_is_refused_and_every_file_kept() {
     );
 }
 
+/// A path as an argument.
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
 /// Issue 51, defect 3: a DSM path that is not a GeoTIFF is refused before any work by every
 /// command that writes a DSM, naming the supported extensions; their case does not matter.
 #[test]
 fn a_dsm_is_written_under_a_geotiff_name_only() {
     let dir = tempfile::tempdir().unwrap();
     let scene = Scene::new(dir.path(), 256);
-    let s = |p: &Path| p.to_str().unwrap().to_string();
     for name in ["cloud.las", "dsm.png", "dsm"] {
         let out = dir.path().join(name);
         let dsm = seasonstereo(&[
@@ -656,8 +701,10 @@ fn a_dsm_is_written_under_a_geotiff_name_only() {
         let stem = name.split('.').next().unwrap();
         assert!(!dir.path().join(format!("{stem}_work")).exists());
     }
-    let o = many(&scene, &dir.path().join("DSM.TIFF"), &["--dry-run"]);
+    let upper = dir.path().join("DSM.TIFF");
+    let o = scene.reconstruct(&upper, &[]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(upper.is_file() && dir.path().join("DSM_filled.tif").is_file());
 }
 
 /// Issue 51, defect 5: `-o` reused for another pair is refused naming the existing DSM (not the
