@@ -216,8 +216,11 @@ fn every_subcommand_names_a_missing_input_once() {
     let x = other.to_str().unwrap();
     let out = dir.path().join("out");
     let o_ = out.to_str().unwrap();
+    // DSMs are written under a GeoTIFF name only.
+    let dsm_out = dir.path().join("out.tif");
+    let d_ = dsm_out.to_str().unwrap();
     let cases: Vec<Vec<&str>> = vec![
-        vec!["reconstruct", m, x, "-o", o_],
+        vec!["reconstruct", m, x, "-o", d_],
         vec!["predict", m, x, "-o", o_],
         vec!["rectify", m, x, "-o", o_],
         vec!["score", m, "--truth", x],
@@ -231,7 +234,7 @@ fn every_subcommand_names_a_missing_input_once() {
             "--rpc-right",
             x,
             "-o",
-            o_,
+            d_,
         ],
         vec!["eval", "--world", m, "--output", o_],
         vec!["teacher", "--pairs", m, "--output", o_],
