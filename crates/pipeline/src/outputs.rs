@@ -143,6 +143,8 @@ pub fn check_dsm_output(
     inputs: &[&Path],
     overwrite: bool,
 ) -> Result<()> {
+    // An output onto an input is named as such first: the most important refusal.
+    check_output_file(flag, output, inputs, true)?;
     check_dsm_extension(flag, output)?;
     check_output_file(flag, output, inputs, overwrite)?;
     for sidecar in crate::dsm::sidecars(output) {

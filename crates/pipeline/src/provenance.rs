@@ -39,10 +39,13 @@ const RUN_ENTRIES: [&str; 8] = [
     "disparity",
 ];
 
-/// Bytes of an input's head that identify it with its size: a TIFF's header and first strips, a
-/// camera JSON whole. A hash of the head, not the modification time, so that copying or
-/// touching an input does not void a resume.
-const HEAD_BYTES: usize = 64 << 10;
+/// An input of at most this many bytes (a camera JSON) is identified by its whole content.
+const WHOLE_BYTES: u64 = 64 << 10;
+
+/// A larger input (an image) by its size and its first bytes (the TIFF header and the start of
+/// the first strips): another acquisition differs there, while a damaged tile rewritten after a
+/// failed run (a repaired download) or a touched file resumes, as `jobs resubmit` expects.
+const HEAD_BYTES: u64 = 4 << 10;
 
 /// One run of a command into a work folder.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -66,7 +69,7 @@ pub struct InputFile {
     pub path: PathBuf,
     /// `None` when it could not be read (the command's own checks name the problem).
     pub size: Option<u64>,
-    /// FNV-1a of its first [`HEAD_BYTES`], hexadecimal.
+    /// FNV-1a of its content ([`WHOLE_BYTES`]) or first [`HEAD_BYTES`], hexadecimal.
     pub head: Option<String>,
 }
 
@@ -83,8 +86,13 @@ impl InputFile {
         let read = || -> std::io::Result<(u64, String)> {
             let mut f = std::fs::File::open(path)?;
             let size = f.metadata()?.len();
-            let mut head = Vec::with_capacity(HEAD_BYTES);
-            f.by_ref().take(HEAD_BYTES as u64).read_to_end(&mut head)?;
+            let read = if size <= WHOLE_BYTES {
+                size
+            } else {
+                HEAD_BYTES
+            };
+            let mut head = Vec::with_capacity(read as usize);
+            f.by_ref().take(read).read_to_end(&mut head)?;
             Ok((size, format!("{:016x}", fnv1a(&head))))
         };
         let (size, head) = read().ok().unzip();

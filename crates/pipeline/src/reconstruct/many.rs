@@ -871,12 +871,12 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
     }
     inputs.extend(opts.truth.iter().cloned());
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    crate::outputs::check_dsm_extension("-o", &opts.output)?;
     let mut outputs = vec![opts.output.clone()];
     outputs.extend(crate::dsm::sidecars(&opts.output));
     for out in &outputs {
         check_output_file("-o", out, &inputs, true)?;
     }
+    crate::outputs::check_dsm_extension("-o", &opts.output)?;
     check_output_folder("--work", &opts.work_dir(), &inputs, false)?;
     let canon = |p: &Path| std::fs::canonicalize(p).ok();
     if let (Some(t), GridChoice::Like(l)) = (&opts.truth, &opts.grid) {

@@ -165,13 +165,13 @@ impl ReconstructOptions {
         ];
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-        crate::outputs::check_dsm_extension("-o", &self.output)?;
         let mut outputs = vec![self.output.clone()];
         outputs.extend(crate::dsm::sidecars(&self.output));
         for (i, out) in outputs.iter().enumerate() {
             let flag = if i == 0 { "-o" } else { "-o (its sidecar)" };
             crate::outputs::check_output_file(flag, out, &inputs, true)?;
         }
+        crate::outputs::check_dsm_extension("-o", &self.output)?;
         let run = crate::provenance::RunRecord::of_reconstruct(self);
         crate::provenance::check(&self.work(), &run, &outputs, &inputs, overwrite)
     }

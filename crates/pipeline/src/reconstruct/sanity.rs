@@ -166,8 +166,8 @@ pub fn check_outputs(opts: &ReconstructOptions, work: &Path) -> Result<()> {
     if let crate::dsm::GridChoice::Like(p) = &opts.grid {
         inputs.push(p);
     }
-    crate::outputs::check_dsm_extension("-o", &opts.output)?;
     crate::outputs::check_output_file("-o", &opts.output, &inputs, true)?;
+    crate::outputs::check_dsm_extension("-o", &opts.output)?;
     crate::outputs::check_output_folder("--work", work, &inputs, false)
 }
 
