@@ -321,12 +321,33 @@ pub fn parse_box(s: &str, names: &str) -> Result<[f64; 4], String> {
     }
 }
 
+/// A tile side: 64 pixels at least, as the library requires, refused here so that
+/// `reconstruct-many` does not start its pairs to see each one fail.
+fn parse_tile(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(t) if t >= 64 => Ok(t),
+        Ok(t) => Err(format!("{t} is too small: tiles need at least 64 pixels")),
+        Err(e) => Err(format!("expected a number of pixels, got {s:?}: {e}")),
+    }
+}
+
+/// A cell size in metres: positive and finite (0 would make a grid of infinitely many cells).
+pub fn parse_resolution(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(r) if r.is_finite() && r > 0.0 => Ok(r),
+        Ok(r) => Err(format!(
+            "the cell size must be a positive number of metres, got {r}"
+        )),
+        Err(e) => Err(format!("expected a cell size in metres, got {s:?}: {e}")),
+    }
+}
+
 /// How a pair is cut into tiles and how many run at once.
 #[derive(Args)]
 pub struct TilingArgs {
     /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
     /// (an affine rectification holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = pipeline::reconstruct::options::DEFAULT_TILE)]
+    #[arg(long, value_name = "PX", default_value_t = pipeline::reconstruct::options::DEFAULT_TILE, value_parser = parse_tile)]
     pub tile: usize,
     /// Overlap collar around each tile, pixels: context for the matcher; only the points of
     /// each tile's core are kept, so the collar never shows as a seam.
@@ -352,7 +373,7 @@ pub struct GridArgs {
     #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
     pub like: Option<PathBuf>,
     /// Cell size in metres (without --like; the grid covers the scene).
-    #[arg(long, default_value_t = pipeline::flags::RESOLUTION)]
+    #[arg(long, default_value_t = pipeline::flags::RESOLUTION, value_parser = parse_resolution)]
     pub resolution: f64,
     /// EPSG code of the UTM zone (without --like; default: the scene's zone).
     #[arg(long)]

@@ -28,7 +28,7 @@ pub struct DsmArgs {
     #[arg(long, conflicts_with_all = ["resolution", "bounds", "epsg"])]
     like: Option<PathBuf>,
     /// Cell size in metres.
-    #[arg(long, default_value_t = flags::RESOLUTION)]
+    #[arg(long, default_value_t = flags::RESOLUTION, value_parser = crate::args::parse_resolution)]
     resolution: f64,
     /// UTM bounds XMIN,YMIN,XMAX,YMAX in metres (default: the extent of the points).
     #[arg(long, value_name = "XMIN,YMIN,XMAX,YMAX", value_parser = parse_bounds, allow_hyphen_values = true)]

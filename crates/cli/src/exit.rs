@@ -15,7 +15,9 @@ pub const EXIT_CODES_HELP: &str = "Exit codes: 0 all done; 1 error before any wo
     or wrong input, a refused output, a malformed command line); 2 partial: some tiles or items \
     failed and are named (--allow-partial makes it 0 with a warning); 3 nothing produced.\n\
     Outputs: an output that is one of the run's inputs is refused; an existing DSM, disparity or \
-    report is only replaced with --overwrite, atomically (written beside, then renamed).";
+    report is only replaced with --overwrite, atomically (written beside, then renamed); a DSM \
+    is written as .tif or .tiff only; a work folder of another run (command, inputs or options) \
+    is refused, or cleared with --overwrite.";
 
 /// The global flags every subcommand obeys.
 #[derive(Clone, Copy, Debug, Default)]

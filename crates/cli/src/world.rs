@@ -13,7 +13,7 @@ pub struct WorldArgs {
     #[arg(short, long, default_value = "out/world")]
     output: PathBuf,
     /// Image width and height, pixels (64 for tests … 2048 for benchmarks).
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = parse_size)]
     size: usize,
     /// Random seed: the same seed always gives the same world.
     #[arg(long, default_value_t = 1)]
@@ -32,6 +32,17 @@ pub struct WorldArgs {
     /// and sun angles in rpc/, and truth/<NAME>_DSM.tif — the input of `reconstruct-many`.
     #[arg(long, conflicts_with = "raw")]
     dates: bool,
+}
+
+/// The views' side: a world needs room for its buildings and the matcher's windows.
+fn parse_size(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 32 => Ok(n),
+        Ok(n) => Err(format!(
+            "{n} is too small: a world needs at least 32 pixels a side"
+        )),
+        Err(e) => Err(format!("expected a number of pixels, got {s:?}: {e}")),
+    }
 }
 
 pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {

@@ -216,8 +216,11 @@ fn every_subcommand_names_a_missing_input_once() {
     let x = other.to_str().unwrap();
     let out = dir.path().join("out");
     let o_ = out.to_str().unwrap();
+    // DSMs are written under a GeoTIFF name only.
+    let dsm_out = dir.path().join("out.tif");
+    let d_ = dsm_out.to_str().unwrap();
     let cases: Vec<Vec<&str>> = vec![
-        vec!["reconstruct", m, x, "-o", o_],
+        vec!["reconstruct", m, x, "-o", d_],
         vec!["predict", m, x, "-o", o_],
         vec!["rectify", m, x, "-o", o_],
         vec!["score", m, "--truth", x],
@@ -231,7 +234,7 @@ fn every_subcommand_names_a_missing_input_once() {
             "--rpc-right",
             x,
             "-o",
-            o_,
+            d_,
         ],
         vec!["eval", "--world", m, "--output", o_],
         vec!["teacher", "--pairs", m, "--output", o_],
@@ -537,4 +540,219 @@ fn swapped_cameras_are_warned_about() {
         unmatched.contains("matched along the rows") && unmatched.contains("swapped?"),
         "{unmatched}"
     );
+}
+
+/// Every file under `dir` with its bytes.
+fn tree(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut files = BTreeMap::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                todo.push(path);
+            } else {
+                files.insert(path.clone(), std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    files
+}
+
+fn assert_same_tree(dir: &Path, before: &BTreeMap<PathBuf, Vec<u8>>) {
+    let now = tree(dir);
+    let names = |t: &BTreeMap<PathBuf, Vec<u8>>| t.keys().cloned().collect::<Vec<_>>();
+    assert_eq!(names(&now), names(before), "files added or removed");
+    for (path, bytes) in before {
+        assert!(&now[path] == bytes, "{} changed", path.display());
+    }
+}
+
+/// `reconstruct-many` of the scene's pair (one pair) onto `output`, with `extra` flags.
+fn many(scene: &Scene, output: &Path, extra: &[&str]) -> Output {
+    let rpc_dir = scene.rpc_left.parent().unwrap();
+    let mut args = vec![
+        "reconstruct-many",
+        scene.left.to_str().unwrap(),
+        scene.right.to_str().unwrap(),
+        "--rpc-dir",
+        rpc_dir.to_str().unwrap(),
+        "--pairs",
+        "1",
+        "-o",
+        output.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    seasonstereo(&args)
+}
+
+/// Issue 51, defect 1: `reconstruct-many` of three dates (the best 2 pairs) onto the DSM of a
+/// `reconstruct` run, whose work folder it would take for its own, exits 1 before any work,
+/// naming the DSM and the other command, and every existing file stays byte-identical. With
+/// `--overwrite` the other run's work folder is cleared and no sidecar of the old DSM stays
+/// beside the new one.
+#[test]
+fn another_command_onto_an_existing_dsm_is_refused_and_every_file_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = dir.path().join("world");
+    let o = seasonstereo(&[
+        "world",
+        "--dates",
+        "--size",
+        "384",
+        "-o",
+        world.to_str().unwrap(),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let image = |k: usize| s(&world.join(format!("raw/WORLD_1_D{k}.tif")));
+    let camera = |k: usize| s(&world.join(format!("rpc/WORLD_1_D{k}.json")));
+    let out_dir = dir.path().join("out");
+    let out = out_dir.join("dsm.tif");
+    let o = seasonstereo(&[
+        "reconstruct",
+        &image(1),
+        &image(2),
+        "--rpc-left",
+        &camera(1),
+        "--rpc-right",
+        &camera(2),
+        "-o",
+        &s(&out),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(out_dir.join("dsm_filled.tif").is_file());
+    let before = tree(&out_dir);
+    let rpc_dir = s(&world.join("rpc"));
+    let (a, b, c) = (image(1), image(2), image(3));
+    let out_arg = s(&out);
+    let many = |extra: &[&str]| {
+        let mut args: Vec<&str> = vec![
+            "reconstruct-many",
+            &a,
+            &b,
+            &c,
+            "--rpc-dir",
+            &rpc_dir,
+            "--pairs",
+            "2",
+            "-o",
+            &out_arg,
+        ];
+        args.extend_from_slice(extra);
+        seasonstereo(&args)
+    };
+    let o = many(&[]);
+    let e = stderr(&o);
+    assert_eq!(code(&o), 1, "{e}\n{}", stdout(&o));
+    assert!(
+        e.contains("dsm.tif already exists")
+            && e.contains("`reconstruct`")
+            && e.contains("--overwrite"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "one line: {e}");
+    assert_plain(&e);
+    assert_same_tree(&out_dir, &before);
+
+    let o = many(&["--overwrite"]);
+    assert_eq!(code(&o), 0, "{}\n{}", stderr(&o), stdout(&o));
+    assert!(
+        !out_dir.join("dsm_filled.tif").exists(),
+        "reconstruct's sidecar left beside the fused DSM"
+    );
+    for f in ["dsm_count.tif", "dsm_spread.tif", "dsm_report.json"] {
+        assert!(out_dir.join(f).is_file(), "{f}");
+    }
+    assert!(
+        !out_dir.join("dsm_work/tiles").exists(),
+        "the other run's tiles are cleared"
+    );
+}
+
+/// A path as an argument.
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// Issue 51, defect 3: a DSM path that is not a GeoTIFF is refused before any work by every
+/// command that writes a DSM, naming the supported extensions; their case does not matter.
+#[test]
+fn a_dsm_is_written_under_a_geotiff_name_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene::new(dir.path(), 256);
+    for name in ["cloud.las", "dsm.png", "dsm"] {
+        let out = dir.path().join(name);
+        let dsm = seasonstereo(&[
+            "dsm",
+            &s(&scene.left),
+            "--homography",
+            &s(&scene.right),
+            "--rpc-left",
+            &s(&scene.rpc_left),
+            "--rpc-right",
+            &s(&scene.rpc_right),
+            "-o",
+            &s(&out),
+        ]);
+        for o in [scene.reconstruct(&out, &[]), many(&scene, &out, &[]), dsm] {
+            let e = stderr(&o);
+            assert_eq!(code(&o), 1, "{name}: {e}\n{}", stdout(&o));
+            assert!(e.contains(".tif or .tiff"), "{name}: {e}");
+            assert_eq!(e.lines().count(), 1, "one line: {e}");
+        }
+        assert!(!out.exists(), "{name} written");
+        let stem = name.split('.').next().unwrap();
+        assert!(!dir.path().join(format!("{stem}_work")).exists());
+    }
+    let upper = dir.path().join("DSM.TIFF");
+    let o = scene.reconstruct(&upper, &[]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(upper.is_file() && dir.path().join("DSM_filled.tif").is_file());
+}
+
+/// Issue 51, defect 5: `-o` reused for another pair is refused naming the existing DSM (not the
+/// work folder's tiles), and so is a rerun with other finishing options, every file kept. With
+/// `--overwrite` the rerun reuses the tiles and rewrites the DSM; the same command then resumes.
+#[test]
+fn another_pair_or_other_finishing_onto_a_dsm_needs_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene::new(dir.path(), 256);
+    let out_dir = dir.path().join("out");
+    let out = out_dir.join("dsm.tif");
+    let o = scene.reconstruct(&out, &[]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let before = tree(&out_dir);
+    let o = scene.reconstruct_with(
+        (&scene.right, &scene.left),
+        (&scene.rpc_right, &scene.rpc_left),
+        &out,
+        &[],
+    );
+    let e = stderr(&o);
+    assert_eq!(code(&o), 1, "{e}");
+    assert!(
+        e.contains("dsm.tif already exists") && e.contains("--overwrite"),
+        "{e}"
+    );
+    assert!(!e.contains("holds tiles computed"), "{e}");
+    assert_same_tree(&out_dir, &before);
+
+    let o = scene.reconstruct(&out, &["--median-filter", "5"]);
+    let e = stderr(&o);
+    assert_eq!(code(&o), 1, "{e}\n{}", stdout(&o));
+    assert!(
+        e.contains("dsm.tif already exists") && e.contains("median_filter"),
+        "{e}"
+    );
+    assert_same_tree(&out_dir, &before);
+
+    let o = scene.reconstruct(&out, &["--median-filter", "5", "--overwrite"]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(stdout(&o).contains(" 0 run now"), "{}", stdout(&o));
+    assert!(
+        std::fs::read(&out).unwrap() != before[&out],
+        "DSM not rewritten"
+    );
+    let o = scene.reconstruct(&out, &["--median-filter", "5"]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
 }

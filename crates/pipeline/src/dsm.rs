@@ -56,8 +56,9 @@ pub struct DsmOptions {
 }
 
 impl DsmOptions {
-    /// Refuses an output DSM that is one of the inputs, or an existing one unless `overwrite`:
-    /// the rule of every caller (command line, Python), before any work.
+    /// Refuses an output DSM that is not a GeoTIFF, is one of the inputs, or exists (it or a
+    /// sidecar of an earlier DSM there, which the run removes) unless `overwrite`: the rule of
+    /// every caller (command line, Python), before any work.
     pub fn check_output(&self, overwrite: bool) -> Result<()> {
         let inputs = [
             &self.disparity,
@@ -66,7 +67,7 @@ impl DsmOptions {
             &self.rpc_right,
         ];
         let inputs = inputs.map(|p| p.as_path());
-        crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite)
+        crate::outputs::check_dsm_output("-o", &self.output, &inputs, overwrite)
     }
 }
 
@@ -100,6 +101,17 @@ pub fn read_camera(path: &Path) -> Result<RpcModel> {
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    if ["rpb", "rpc", "txt", "xml"]
+        .iter()
+        .any(|e| ext.eq_ignore_ascii_case(e))
+    {
+        bail!(
+            "{}: a camera is read from a SatNeRF/rpcm JSON (.json) or a GeoTIFF carrying the RPC \
+             tag, not from a .{ext} file: convert it to rpcm JSON, or give the image itself",
+            path.display()
+        );
+    }
     let rpc = if is_json {
         RpcModel::read_rpcm_json(path)
     } else {
@@ -180,6 +192,7 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
     let fill = opts.fill_holes.map(HoleFill::spanning);
     let dsm = finish_dsm(dsm, fill, opts.median_filter)?;
+    remove_other_sidecars(&opts.output, &[])?;
     write_dsm(&opts.output, &dsm, &grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
     let comparison = match &opts.compare {
@@ -233,6 +246,42 @@ pub const CONFIDENCE_SUFFIX: &str = "_confidence.tif";
 /// the pairs' heights by.
 pub fn confidence_path(dsm: &Path) -> PathBuf {
     sidecar_path(dsm, CONFIDENCE_SUFFIX)
+}
+
+/// Suffixes of the files named after a DSM that describe it: `reconstruct`'s filled cells and
+/// confidence, `reconstruct-many`'s count, spread, confidence and report.
+pub const SIDECAR_SUFFIXES: [&str; 5] = [
+    FILLED_SUFFIX,
+    CONFIDENCE_SUFFIX,
+    "_count.tif",
+    "_spread.tif",
+    "_report.json",
+];
+
+/// Every sidecar a DSM at `dsm` may have ([`SIDECAR_SUFFIXES`]).
+pub fn sidecars(dsm: &Path) -> Vec<PathBuf> {
+    SIDECAR_SUFFIXES
+        .iter()
+        .map(|s| sidecar_path(dsm, s))
+        .collect()
+}
+
+/// Removes the sidecars of `dsm` whose suffix is not in `written`, before a new DSM is written
+/// there: a file describing the DSM it replaces (another command's, an earlier run's) must not
+/// stay beside the new one.
+pub fn remove_other_sidecars(dsm: &Path, written: &[&str]) -> Result<()> {
+    for suffix in SIDECAR_SUFFIXES.iter().filter(|s| !written.contains(*s)) {
+        let path = sidecar_path(dsm, suffix);
+        if path.is_file() {
+            std::fs::remove_file(&path).with_context(|| {
+                format!(
+                    "removing {}, which describes the DSM being replaced",
+                    path.display()
+                )
+            })?;
+        }
+    }
+    Ok(())
 }
 
 /// Which cells of a finished DSM were measured and which invented, so that users and the fusion of

@@ -20,6 +20,7 @@ pub mod outputs;
 pub mod pairs;
 pub mod predict;
 pub mod progress;
+pub mod provenance;
 pub mod reconstruct;
 pub mod rectify;
 pub mod report;

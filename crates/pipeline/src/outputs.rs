@@ -115,6 +115,49 @@ pub fn check_output_file(
     Ok(())
 }
 
+/// The extensions a DSM is written under (any case): the writers make GeoTIFFs only, and a
+/// GeoTIFF named `.las` or `.png` misleads every tool that trusts the name.
+pub const DSM_EXTENSIONS: [&str; 2] = ["tif", "tiff"];
+
+/// Refuses a DSM path whose extension is not one of [`DSM_EXTENSIONS`].
+pub fn check_dsm_extension(flag: &str, output: &Path) -> Result<()> {
+    let ext = output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if ext.is_some_and(|e| DSM_EXTENSIONS.contains(&e.as_str())) {
+        return Ok(());
+    }
+    bail!(
+        "{flag} {}: a DSM is written as a GeoTIFF only; give a path ending in .{} (any case)",
+        output.display(),
+        DSM_EXTENSIONS.join(" or .")
+    )
+}
+
+/// The checks of a DSM output with its sidecars ([`crate::dsm::sidecars`]): a GeoTIFF path, none
+/// of them an input, none existing unless `overwrite`.
+pub fn check_dsm_output(
+    flag: &str,
+    output: &Path,
+    inputs: &[&Path],
+    overwrite: bool,
+) -> Result<()> {
+    // An output onto an input is named as such first: the most important refusal.
+    check_output_file(flag, output, inputs, true)?;
+    check_dsm_extension(flag, output)?;
+    check_output_file(flag, output, inputs, overwrite)?;
+    for sidecar in crate::dsm::sidecars(output) {
+        check_output_file(
+            &format!("{flag} (its sidecar)"),
+            &sidecar,
+            inputs,
+            overwrite,
+        )?;
+    }
+    Ok(())
+}
+
 /// Refuses an output (file or folder) that is one of the run's `inputs`, or a folder that holds
 /// one of them when `clears` (the command empties or rewrites the folder).
 pub fn check_output_folder(

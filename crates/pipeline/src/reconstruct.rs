@@ -278,6 +278,7 @@ pub fn reconstruct(
         merge_memory,
         ..
     } = plan;
+    crate::provenance::claim(&work, &crate::provenance::RunRecord::of_reconstruct(opts))?;
     claim_work_folder(&work, &scene_settings(opts, roi, alt_range, &grid))?;
     let folder = TileFolder::new(&work);
     let mut seconds = Vec::new();

@@ -108,8 +108,8 @@ pub struct ReconstructManyOptions {
     /// run only runs its tiles ([`shard_of_pair`]); the run without a shard (`Shard::ALL`)
     /// assembles the pairs and fuses them.
     pub shard: Shard,
-    /// Replace an existing DSM, count, spread or report (atomically). A rerun into the work
-    /// folder of an earlier run of the same output replaces them without it.
+    /// Replace an existing DSM, count, spread or report (atomically), and clear a work folder of
+    /// another run. A rerun of the same run ([`crate::provenance`]) replaces them without it.
     pub overwrite: bool,
 }
 
@@ -324,6 +324,7 @@ pub fn reconstruct_many(
         return Ok(summary);
     }
     let rows = fusion_rows(&grids.fused, summary.chosen.len(), opts.max_memory)?;
+    crate::provenance::claim(&summary.work, &crate::provenance::RunRecord::of_many(opts))?;
     run_pairs(opts, &mut summary, &grids, progress);
     if opts.shard != Shard::ALL {
         summary.shard = Some(format!("{}/{}", opts.shard.index, opts.shard.count));
@@ -642,6 +643,11 @@ fn write_fused(
     let count = Image::new(w, h, 1, fused.counts.iter().map(|&c| c as f32).collect())?;
     let (count_path, spread_path) = (opts.sibling("_count.tif"), opts.sibling("_spread.tif"));
     let confidence_path = opts.sibling("_confidence.tif");
+    // The report is rewritten after the DSM; `reconstruct`'s filled cells describe no fusion.
+    crate::dsm::remove_other_sidecars(
+        &opts.output,
+        &["_count.tif", "_spread.tif", crate::dsm::CONFIDENCE_SUFFIX],
+    )?;
     let write = |path: &Path, image: Image| {
         write_dsm(path, &image, grid).with_context(|| format!("writing {}", path.display()))
     };
@@ -849,7 +855,8 @@ fn check_overlaps(views: &[View]) -> Result<()> {
     Ok(())
 }
 
-/// Refuses outputs that are inputs, and `--truth` without its grid.
+/// Refuses outputs that are inputs or not GeoTIFFs, existing ones that are not this run's
+/// ([`crate::provenance`]), and `--truth` without its grid.
 fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
     let mut inputs: Vec<PathBuf> = opts.images.clone();
     if let Some(dir) = &opts.rpc_dir {
@@ -864,18 +871,12 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
     }
     inputs.extend(opts.truth.iter().cloned());
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    // A rerun into the work folder of an earlier run of this output resumes it and rewrites its
-    // products.
-    let overwrite = opts.overwrite || opts.dry_run || opts.work_dir().is_dir();
-    for (flag, out) in [
-        ("-o", opts.output.clone()),
-        ("the count raster", opts.sibling("_count.tif")),
-        ("the spread raster", opts.sibling("_spread.tif")),
-        ("the confidence raster", opts.sibling("_confidence.tif")),
-        ("the report", opts.sibling("_report.json")),
-    ] {
-        check_output_file(flag, &out, &inputs, overwrite)?;
+    let mut outputs = vec![opts.output.clone()];
+    outputs.extend(crate::dsm::sidecars(&opts.output));
+    for out in &outputs {
+        check_output_file("-o", out, &inputs, true)?;
     }
+    crate::outputs::check_dsm_extension("-o", &opts.output)?;
     check_output_folder("--work", &opts.work_dir(), &inputs, false)?;
     let canon = |p: &Path| std::fs::canonicalize(p).ok();
     if let (Some(t), GridChoice::Like(l)) = (&opts.truth, &opts.grid) {
@@ -887,6 +888,12 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
         }
     } else if opts.truth.is_some() {
         bail!("--truth needs --like on the same file (the scores need its grid)");
+    }
+    // Last, as it may clear another run's work folder (with --overwrite): a rerun of the same
+    // run resumes it and rewrites its products; a dry run writes nothing.
+    if !opts.dry_run {
+        let run = crate::provenance::RunRecord::of_many(opts);
+        crate::provenance::check(&opts.work_dir(), &run, &outputs, &inputs, opts.overwrite)?;
     }
     Ok(())
 }

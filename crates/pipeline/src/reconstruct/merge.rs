@@ -147,6 +147,10 @@ pub fn merge_tiles(
         .collect();
     let points = parts.iter().map(|(r, _)| r.points).sum();
     let sidecar = filled_path(output);
+    crate::dsm::remove_other_sidecars(
+        output,
+        &[crate::dsm::FILLED_SUFFIX, crate::dsm::CONFIDENCE_SUFFIX],
+    )?;
     let mut dsm_out = Output::create(output, grid)?;
     let mut filled_out = Output::create(&sidecar, grid)?;
     // Only when every tile's cells carry it (tiles of an earlier version, resumed, do not); a

@@ -145,12 +145,12 @@ impl ReconstructOptions {
             .unwrap_or_else(|| default_work_dir(&self.output))
     }
 
-    /// Refuses an output DSM (or its filled-cell sidecar) that is one of the inputs, or an existing one unless `overwrite` or
-    /// it is the product of an earlier run of this work folder (its `scene.json` there: the
-    /// tiles' settings are checked against the folder's, and a resumed run rewrites it). The
-    /// rule of every caller (command line, Python), before any work.
+    /// Refuses, before any work, an output DSM that is not a GeoTIFF, that (or one of its
+    /// sidecars) is one of the inputs, or that exists unless `overwrite` or it is the product
+    /// of an earlier run of this same run in its work folder ([`crate::provenance`]: another
+    /// run's folder is refused, or cleared with `overwrite`). The rule of every caller (command
+    /// line, Python).
     pub fn check_output(&self, overwrite: bool) -> anyhow::Result<()> {
-        let work = self.work();
         let like = match &self.grid {
             GridChoice::Like(p) => Some(p),
             _ => None,
@@ -165,17 +165,15 @@ impl ReconstructOptions {
         ];
         let inputs: Vec<&std::path::Path> =
             inputs.into_iter().flatten().map(|p| p.as_path()).collect();
-        let overwrite = overwrite || work.join("scene.json").is_file();
-        let sidecar = crate::dsm::filled_path(&self.output);
-        let confidence = crate::dsm::confidence_path(&self.output);
-        crate::outputs::check_output_file("-o", &self.output, &inputs, overwrite)?;
-        crate::outputs::check_output_file("-o (its _filled.tif)", &sidecar, &inputs, overwrite)?;
-        crate::outputs::check_output_file(
-            "-o (its _confidence.tif)",
-            &confidence,
-            &inputs,
-            overwrite,
-        )
+        let mut outputs = vec![self.output.clone()];
+        outputs.extend(crate::dsm::sidecars(&self.output));
+        for (i, out) in outputs.iter().enumerate() {
+            let flag = if i == 0 { "-o" } else { "-o (its sidecar)" };
+            crate::outputs::check_output_file(flag, out, &inputs, true)?;
+        }
+        crate::outputs::check_dsm_extension("-o", &self.output)?;
+        let run = crate::provenance::RunRecord::of_reconstruct(self);
+        crate::provenance::check(&self.work(), &run, &outputs, &inputs, overwrite)
     }
 
     /// How the cameras are named in messages: the JSON files, or the images' RPC tags.

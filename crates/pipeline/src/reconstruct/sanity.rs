@@ -156,7 +156,8 @@ pub fn check_pair(
     check_cameras_overlap(opts, images, cameras, alt_range)
 }
 
-/// Refuses a DSM path or a work folder that is one of the run's inputs.
+/// Refuses a DSM path that is not a GeoTIFF, or a DSM path or a work folder that is one of the
+/// run's inputs.
 pub fn check_outputs(opts: &ReconstructOptions, work: &Path) -> Result<()> {
     let mut inputs: Vec<&Path> = vec![&opts.left, &opts.right];
     inputs.extend(opts.rpc_left.as_deref());
@@ -166,6 +167,7 @@ pub fn check_outputs(opts: &ReconstructOptions, work: &Path) -> Result<()> {
         inputs.push(p);
     }
     crate::outputs::check_output_file("-o", &opts.output, &inputs, true)?;
+    crate::outputs::check_dsm_extension("-o", &opts.output)?;
     crate::outputs::check_output_folder("--work", work, &inputs, false)
 }
 
