@@ -8,6 +8,7 @@
 
 mod error;
 
+pub mod adjust;
 pub mod dsm;
 pub mod rectify;
 pub mod rpc;
@@ -15,6 +16,9 @@ pub mod triangulate;
 pub mod utm;
 pub mod vendor;
 
+pub use adjust::{
+    adjust_translations, AdjustParams, Adjustment, Gauge, ImageFit, Observation, Track,
+};
 pub use dsm::{
     dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window,
     rasterize_window_with, read_dsm, resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow,

@@ -345,6 +345,26 @@ impl RpcModel {
         Ok(())
     }
 
+    /// rpcm's dictionary of the model (the keys [`RpcModel::from_rpcm_json`] reads), with the
+    /// altitude bounds when known: what the corrected cameras are written as.
+    pub fn to_rpcm_json(&self) -> Value {
+        let mut v = serde_json::json!({
+            "row_offset": self.row_offset, "col_offset": self.col_offset,
+            "lat_offset": self.lat_offset, "lon_offset": self.lon_offset,
+            "alt_offset": self.alt_offset,
+            "row_scale": self.row_scale, "col_scale": self.col_scale,
+            "lat_scale": self.lat_scale, "lon_scale": self.lon_scale,
+            "alt_scale": self.alt_scale,
+            "row_num": self.row_num.to_vec(), "row_den": self.row_den.to_vec(),
+            "col_num": self.col_num.to_vec(), "col_den": self.col_den.to_vec(),
+        });
+        if let (Some(lo), Some(hi)) = (self.min_alt, self.max_alt) {
+            v["min_alt"] = lo.into();
+            v["max_alt"] = hi.into();
+        }
+        v
+    }
+
     /// The model's altitude validity range, `alt_offset ± alt_scale`: a safe bound when deriving
     /// a disparity search range from the cameras.
     pub fn altitude_range(&self) -> (f64, f64) {
@@ -561,6 +581,18 @@ mod tests {
         let (a0, b0) = c.apply_normalised(l, p - e, h);
         assert!(((a - a0) / (2.0 * e) - j[0][1]).abs() < 1e-8);
         assert!(((b - b0) / (2.0 * e) - j[1][1]).abs() < 1e-8);
+    }
+
+    #[test]
+    fn the_rpcm_dictionary_reads_back_as_the_same_model() {
+        let mut c = camera();
+        c.min_alt = Some(-5.0);
+        c.max_alt = Some(40.0);
+        let back = RpcModel::from_rpcm_json(&serde_json::json!({
+            "rpc": c.to_rpcm_json(), "min_alt": -5.0, "max_alt": 40.0
+        }))
+        .unwrap();
+        assert_eq!(back, c);
     }
 
     #[test]

@@ -36,4 +36,12 @@ impl Progress for Bars {
             bar.finish();
         }
     }
+
+    /// Printed above the bar (or alone on a log), at once.
+    fn note(&self, line: &str) {
+        match self.current.lock().expect("progress lock").as_ref() {
+            Some(bar) => bar.suspend(|| eprintln!("{line}")),
+            None => eprintln!("{line}"),
+        }
+    }
 }

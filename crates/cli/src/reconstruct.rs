@@ -88,9 +88,16 @@ pub struct ReconstructArgs {
     single_view: bool,
     /// Altitudes of the scene MIN:MAX, metres: the disparity search covers them and little more
     /// (heights outside are not found). Default: min_alt/max_alt of the JSON cameras, else the
-    /// RPCs' altitude offset ± scale.
+    /// altitudes of the tie points found to correct the pointing (their 0.5 and 99.5
+    /// percentiles, widened by 5 m and a tenth of their span).
     #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
     alt_range: Option<(f64, f64)>,
+    /// Use the cameras as given. By default the pair's relative pointing error (vendor RPCs are
+    /// off by a few to tens of pixels, one translation over the image) is measured from tie
+    /// points between the images and removed by translating the right camera; the log says by
+    /// how much. Without it and without JSON cameras, give --alt-range.
+    #[arg(long)]
+    no_pointing_correction: bool,
     /// Folder of the intermediate files (default: OUTPUT without extension + "_work").
     #[arg(long, value_name = "DIR")]
     work: Option<PathBuf>,
@@ -203,6 +210,7 @@ impl ReconstructArgs {
             keep_intermediates: self.keep_intermediates,
             both_views: !self.single_view,
             level_ground: true,
+            adjust_pointing: !self.no_pointing_correction,
         })
     }
 }

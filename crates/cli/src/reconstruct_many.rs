@@ -110,9 +110,18 @@ pub struct ReconstructManyArgs {
     #[arg(long, value_name = "DSM", requires = "like")]
     truth: Option<PathBuf>,
     /// Altitudes of the scene MIN:MAX, metres (default: the JSONs' min_alt/max_alt, else the
-    /// RPCs').
+    /// altitudes of the bundle adjustment's tie points, their 0.5 and 99.5 percentiles widened
+    /// by 5 m and a tenth of their span).
     #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
     alt_range: Option<(f64, f64)>,
+    /// Use the cameras as given. By default every camera's pointing error (vendor RPCs are off
+    /// by a few to tens of pixels, one translation over each image) is corrected by one bundle
+    /// adjustment of all the images on tie points tracked across them (near dates chaining the
+    /// seasons); the corrected cameras are written as RPC JSON under the work folder
+    /// (cameras/<image stem>.json, usable by `reconstruct --rpc-left/--rpc-right`) and the
+    /// corrections and residuals printed and kept in the report.
+    #[arg(long)]
+    no_pointing_correction: bool,
     /// Height of a cell of a pair's DSM from its points.
     #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
     gridding: GriddingArg,
@@ -210,6 +219,7 @@ impl ReconstructManyArgs {
         o.both_views = !self.single_view;
         o.truth = self.truth;
         o.alt_range = self.alt_range;
+        o.adjust_pointing = !self.no_pointing_correction;
         o.gridding = self.gridding.into();
         (o.tile, o.collar) = (self.tiling.tile, self.tiling.collar);
         o.max_memory = self.tiling.max_memory_bytes()?;
@@ -224,8 +234,9 @@ fn print_pairs(chosen: &[PairChoice], views: &[View], candidates: usize) {
     let undated = views.iter().filter(|v| v.day.is_none()).count();
     if undated > 0 {
         eprintln!(
-            "warning: {undated} of {} images have no acquisition date (it comes from the JSON \
-             cameras of --rpc-dir): their pairs get the date term 0.5",
+            "warning: {undated} of {} images have no acquisition date (from the JSON cameras of \
+             --rpc-dir, an .IMD or DIMAP file beside the image, or the NITF date in its tags): \
+             their pairs get the date term 0.5",
             views.len()
         );
     }

@@ -49,6 +49,7 @@ mod range;
 mod select;
 mod sgm;
 pub mod speckle;
+pub mod tie;
 
 pub use census::CensusWindow;
 pub use error::MatchError;

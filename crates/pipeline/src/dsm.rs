@@ -95,29 +95,11 @@ pub struct DsmSummary {
     pub comparison: Option<Comparison>,
 }
 
-/// Reads a camera from a SatNeRF/rpcm JSON file or from the RPC tag of a GeoTIFF.
+/// Reads a camera from any file that holds one: SatNeRF/rpcm JSON, `.RPB`, `_RPC.TXT`, DIMAP
+/// `RPC_*.XML`, or a GeoTIFF's RPC tag ([`camera::read_camera_file`]).
 pub fn read_camera(path: &Path) -> Result<RpcModel> {
-    let is_json = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-    if ["rpb", "rpc", "txt", "xml"]
-        .iter()
-        .any(|e| ext.eq_ignore_ascii_case(e))
-    {
-        bail!(
-            "{}: a camera is read from a SatNeRF/rpcm JSON (.json) or a GeoTIFF carrying the RPC \
-             tag, not from a .{ext} file: convert it to rpcm JSON, or give the image itself",
-            path.display()
-        );
-    }
-    let rpc = if is_json {
-        RpcModel::read_rpcm_json(path)
-    } else {
-        RpcModel::read_geotiff_rpc(path)
-    };
-    rpc.with_context(|| format!("reading the camera of {}", path.display()))
+    camera::read_camera_file(path)
+        .with_context(|| format!("reading the camera of {}", path.display()))
 }
 
 /// Pixels whose disparity is finite and whose match lies inside the right image, `border` pixels

@@ -9,6 +9,9 @@ pub trait Progress: Sync {
     fn advance(&self, done: usize);
     /// The current loop is over.
     fn end(&self);
+    /// A line for the log, said as it happens (what was decided, what was found); shown by
+    /// default nowhere.
+    fn note(&self, _line: &str) {}
 }
 
 /// Shows nothing (tests, library use).

@@ -28,8 +28,9 @@ pub const RECORD: &str = "run.json";
 /// intermediates, `reconstruct-many`'s pairs): its content, what clearing removes. Anything else
 /// is left alone: the job files a cluster submission writes before its first task (`jobs/`), a
 /// user's own files in a folder given to `--work`.
-const RUN_ENTRIES: [&str; 8] = [
+const RUN_ENTRIES: [&str; 9] = [
     "scene.json",
+    "cameras",
     "tiles",
     "pairs",
     "L",
@@ -131,6 +132,13 @@ fn grid_input(grid: &GridChoice) -> Option<&Path> {
     }
 }
 
+/// The vendor files found beside an image (its camera, its metadata): inputs too.
+fn sidecars(image: &Path) -> impl Iterator<Item = InputFile> {
+    let camera = camera::find_camera_file(image).map(|p| InputFile::of("camera_sidecar", &p));
+    let metadata = camera::find_metadata_file(image).map(|p| InputFile::of("metadata", &p));
+    camera.into_iter().chain(metadata)
+}
+
 impl RunRecord {
     /// The record of a `reconstruct` run (also each pair of `reconstruct-many`).
     pub fn of_reconstruct(o: &ReconstructOptions) -> RunRecord {
@@ -147,6 +155,7 @@ impl RunRecord {
         for (role, path) in optional {
             inputs.extend(path.map(|p| InputFile::of(role, p)));
         }
+        inputs.extend(sidecars(&o.left).chain(sidecars(&o.right)));
         RunRecord {
             command: "reconstruct".into(),
             inputs,
@@ -162,6 +171,7 @@ impl RunRecord {
                 "collar": o.collar,
                 "both_views": o.both_views,
                 "level_ground": o.level_ground,
+                "adjust_pointing": o.adjust_pointing,
             }),
             product: Product {
                 output: resolve(&o.output),
@@ -184,6 +194,7 @@ impl RunRecord {
                 Some(dir.join(format!("{}.json", stem.to_string_lossy())))
             });
             inputs.extend(camera.map(|c| InputFile::of("camera", &c)));
+            inputs.extend(sidecars(image));
         }
         inputs.extend(grid_input(&o.grid).map(|p| InputFile::of("like", p)));
         inputs.extend(o.truth.as_deref().map(|p| InputFile::of("truth", p)));
@@ -196,6 +207,7 @@ impl RunRecord {
                 "pair_median_filter": o.pair_median_filter,
                 "both_views": o.both_views,
                 "alt_range": o.alt_range,
+                "adjust_pointing": o.adjust_pointing,
                 "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
                 "gridding": format!("{:?}", o.gridding),
                 "tile": o.tile,

@@ -24,6 +24,7 @@ pub mod merge;
 pub mod mosaic;
 pub mod options;
 pub mod plan;
+pub mod pointing;
 pub mod raw;
 pub mod sanity;
 pub mod select;
@@ -43,7 +44,7 @@ use crate::dsm::{DsmSummary, GridChoice};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
 use crate::progress::Progress;
-use crate::rectify::{altitude_range, camera_of, file_stem};
+use crate::rectify::{altitude_range, camera_of, file_stem, given_altitude_range};
 use crate::stage::write_json;
 use folder::TileFolder;
 use merge::{check_merge_memory, merge_tiles, Finishing, MERGE_BLOCK_ROWS};
@@ -78,6 +79,9 @@ pub struct ReconstructSummary {
     pub scores: Option<DsmScores>,
     /// Wall time of each step, seconds.
     pub seconds: Vec<(&'static str, f64)>,
+    /// The pointing correction of the right camera and the tie points' altitudes, when the
+    /// pair was adjusted.
+    pub pointing: Option<pointing::Pointing>,
 }
 
 impl ReconstructSummary {
@@ -219,7 +223,7 @@ pub struct ScenePlan {
 /// The plan of a reconstruction: the inputs and outputs checked, the tiles cut, the grid chosen
 /// and every tile's memory estimated; nothing is written.
 pub fn plan(opts: &ReconstructOptions) -> Result<ScenePlan> {
-    let (pair, mut plan) = prepare(opts)?;
+    let (pair, mut plan) = prepare(opts, &crate::progress::Silent)?;
     let scene = pair.scene(
         opts,
         &plan.grid,
@@ -234,12 +238,12 @@ pub fn plan(opts: &ReconstructOptions) -> Result<ScenePlan> {
 }
 
 /// The checks and choices before any work: outputs, inputs, region, tiles, grid, merge memory.
-fn prepare(opts: &ReconstructOptions) -> Result<(OpenPair, ScenePlan)> {
+fn prepare(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<(OpenPair, ScenePlan)> {
     opts.check_truth()?;
     check_tile_side(opts.tile)?;
     let work = opts.work();
     sanity::check_outputs(opts, &work)?;
-    let pair = open_pair(opts)?;
+    let pair = open_pair(opts, progress)?;
     let (w, h) = pair.left.size();
     let roi = region_of_interest(opts, &pair.rpc_left, pair.alt_range, (w, h))?;
     let stem = format!("{}-{}", file_stem(&opts.left)?, file_stem(&opts.right)?);
@@ -267,7 +271,7 @@ pub fn reconstruct(
     opts: &ReconstructOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
-    let (pair, plan) = prepare(opts)?;
+    let (pair, plan) = prepare(opts, progress)?;
     let ScenePlan {
         work,
         stem,
@@ -282,6 +286,9 @@ pub fn reconstruct(
     claim_work_folder(&work, &scene_settings(opts, roi, alt_range, &grid))?;
     let folder = TileFolder::new(&work);
     let mut seconds = Vec::new();
+    if let Some(p) = &pair.pointing {
+        seconds.push(("pointing", p.seconds));
+    }
     let run = if opts.merge_only {
         TilesRun::default()
     } else {
@@ -314,6 +321,7 @@ pub fn reconstruct(
         dsm: None,
         scores: None,
         seconds,
+        pointing: pair.pointing.clone(),
     };
     if opts.tiles_only {
         return Ok(summary);
@@ -370,10 +378,12 @@ struct OpenPair {
     rpc_right: RpcModel,
     alt_range: (f64, f64),
     alt_source: &'static str,
+    /// The pointing correction applied to the right camera, when adjusted.
+    pointing: Option<pointing::Pointing>,
 }
 
 /// Opens both raw images and their cameras (the RPC tags or the JSON files).
-fn open_pair(opts: &ReconstructOptions) -> Result<OpenPair> {
+fn open_pair(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<OpenPair> {
     let left = RawImage::open(&opts.left, "left")?;
     let right = RawImage::open(&opts.right, "right")?;
     let rpc_left = camera_of(
@@ -382,13 +392,54 @@ fn open_pair(opts: &ReconstructOptions) -> Result<OpenPair> {
         opts.rpc_left.as_deref(),
         "left",
     )?;
-    let rpc_right = camera_of(
+    let mut rpc_right = camera_of(
         &opts.right,
         right.rpc.clone(),
         opts.rpc_right.as_deref(),
         "right",
     )?;
-    let (alt_range, alt_source) = altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
+    let mut pointing = None;
+    let (alt_range, alt_source) = if opts.adjust_pointing {
+        let given = given_altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
+        let alt = given.map_or(rpc_left.alt_offset, |((lo, hi), _)| 0.5 * (lo + hi));
+        progress.note("pointing: tying the pair (tie points, then the right camera adjusted)");
+        match pointing::adjust_pair((&left, &rpc_left), (&right, &rpc_right), alt) {
+            Ok(p) => {
+                let names = [file_stem(&opts.left)?, file_stem(&opts.right)?];
+                for line in pointing::describe(&p, &names).iter().skip(1) {
+                    progress.note(&format!("pointing: {line}"));
+                }
+                rpc_right = p.corrected(&[rpc_left.clone(), rpc_right])[1].clone();
+                let range = given.unwrap_or((p.alt_range, "tie points"));
+                progress.note(&format!(
+                    "altitudes: {:.1} to {:.1} m ({})",
+                    range.0 .0, range.0 .1, range.1
+                ));
+                pointing = Some(p);
+                range
+            }
+            Err(e) => match given {
+                Some(range) => {
+                    progress.note(&format!(
+                        "warning: the pointing of the pair was not corrected ({}); the cameras \
+                         are used as given",
+                        crate::outputs::one_line(&e)
+                    ));
+                    range
+                }
+                None => {
+                    return Err(e.context(format!(
+                        "{} and {}: the scene's altitudes could not be found from tie points: give \
+                         them with --alt-range MIN:MAX (or --no-pointing-correction and the range)",
+                        opts.left.display(),
+                        opts.right.display()
+                    )))
+                }
+            },
+        }
+    } else {
+        altitude_range(opts.alt_range, &rpc_left, &rpc_right)?
+    };
     sanity::check_pair(opts, (&left, &right), (&rpc_left, &rpc_right), alt_range)?;
     Ok(OpenPair {
         left,
@@ -397,6 +448,7 @@ fn open_pair(opts: &ReconstructOptions) -> Result<OpenPair> {
         rpc_right,
         alt_range,
         alt_source,
+        pointing,
     })
 }
 

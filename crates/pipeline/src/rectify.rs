@@ -95,26 +95,58 @@ fn read_raw(path: &Path, which: &str) -> Result<(Image, Option<RpcModel>)> {
     Ok((image, raw.rpc))
 }
 
-/// The camera of one view: the given camera file when there is one (a SatNeRF/rpcm JSON, or a
-/// GeoTIFF carrying the RPC tag, e.g. the original image beside a resampled one), else the
-/// image's own tag.
+/// The camera of one view: the given camera file when there is one (a SatNeRF/rpcm JSON, a
+/// vendor `.RPB`, `_RPC.TXT` or DIMAP `RPC_*.XML`, or a GeoTIFF carrying the RPC tag, e.g. the
+/// original image beside a resampled one), else the vendor sidecar found beside the image as
+/// GDAL finds it, else the image's own RPC tag.
 pub(crate) fn camera_of(
     image_path: &Path,
     tag: Option<RpcModel>,
     camera: Option<&Path>,
     which: &str,
 ) -> Result<RpcModel> {
-    match (camera, tag) {
-        (Some(path), _) => {
-            crate::dsm::read_camera(path).with_context(|| format!("the {which} camera"))
+    if let Some(path) = camera {
+        return crate::dsm::read_camera(path).with_context(|| format!("the {which} camera"));
+    }
+    if camera::find_camera_file(image_path).is_some() || tag.is_none() {
+        if let Some((rpc, _)) = camera::camera_beside(image_path)
+            .with_context(|| format!("the {which} camera, found beside its image"))?
+        {
+            return Ok(rpc);
         }
-        (None, Some(rpc)) => Ok(rpc),
-        (None, None) => bail!(
-            "{}: no RPC camera (the image has no RPC tag 50844); pass --rpc-{which} with its \
-             SatNeRF/rpcm JSON (or a GeoTIFF carrying the tag)",
+    }
+    match tag {
+        Some(rpc) => Ok(rpc),
+        None => bail!(
+            "{}: no RPC camera: the image has no RPC tag 50844 and no sidecar beside it \
+             (<name>.RPB, <name>_RPC.TXT, or a DIMAP RPC_<name>.XML); put the vendor's camera \
+             file there, or pass --rpc-{which} with it (or a SatNeRF/rpcm JSON)",
             image_path.display()
         ),
     }
+}
+
+/// The altitude range the user or the cameras give: the user's, else the union of the JSONs'
+/// `min_alt`/`max_alt`; `None` when neither does.
+pub(crate) fn given_altitude_range(
+    user: Option<(f64, f64)>,
+    left: &RpcModel,
+    right: &RpcModel,
+) -> Result<Option<((f64, f64), &'static str)>> {
+    if let Some((lo, hi)) = user {
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            bail!("the altitude range must satisfy MIN < MAX, got {lo}:{hi}");
+        }
+        return Ok(Some(((lo, hi), "user")));
+    }
+    let lo = [left.min_alt, right.min_alt].into_iter().flatten();
+    let hi = [left.max_alt, right.max_alt].into_iter().flatten();
+    if let (Some(lo), Some(hi)) = (lo.reduce(f64::min), hi.reduce(f64::max)) {
+        if lo < hi {
+            return Ok(Some(((lo, hi), "min_alt/max_alt of the RPC JSON")));
+        }
+    }
+    Ok(None)
 }
 
 /// The altitude range: the user's, else the union of the JSONs' `min_alt`/`max_alt`, else the
@@ -124,18 +156,8 @@ pub(crate) fn altitude_range(
     left: &RpcModel,
     right: &RpcModel,
 ) -> Result<((f64, f64), &'static str)> {
-    if let Some((lo, hi)) = user {
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            bail!("the altitude range must satisfy MIN < MAX, got {lo}:{hi}");
-        }
-        return Ok(((lo, hi), "user"));
-    }
-    let lo = [left.min_alt, right.min_alt].into_iter().flatten();
-    let hi = [left.max_alt, right.max_alt].into_iter().flatten();
-    if let (Some(lo), Some(hi)) = (lo.reduce(f64::min), hi.reduce(f64::max)) {
-        if lo < hi {
-            return Ok(((lo, hi), "min_alt/max_alt of the RPC JSON"));
-        }
+    if let Some(given) = given_altitude_range(user, left, right)? {
+        return Ok(given);
     }
     let (l, r) = (left.altitude_range(), right.altitude_range());
     let (lo, hi) = (l.0.max(r.0), l.1.min(r.1));

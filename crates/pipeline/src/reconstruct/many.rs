@@ -111,6 +111,11 @@ pub struct ReconstructManyOptions {
     /// Replace an existing DSM, count, spread or report (atomically), and clear a work folder of
     /// another run. A rerun of the same run ([`crate::provenance`]) replaces them without it.
     pub overwrite: bool,
+    /// Adjust every camera's pointing at once from tie points ([`super::pointing`]) and take
+    /// the scene's altitudes from them when neither `alt_range` nor the cameras give any; the
+    /// corrected cameras are written under the work folder (`cameras/<image stem>.json`) and
+    /// the pairs use them.
+    pub adjust_pointing: bool,
 }
 
 /// Default number of pairs.
@@ -170,6 +175,7 @@ impl ReconstructManyOptions {
             max_memory: 2 << 30,
             shard: Shard::ALL,
             overwrite: false,
+            adjust_pointing: true,
         }
     }
 
@@ -254,6 +260,8 @@ pub struct FusedOutcome {
 #[derive(Clone, Debug, Serialize)]
 pub struct ReconstructManySummary {
     pub views: Vec<View>,
+    /// The bundle adjustment of the cameras, when run.
+    pub pointing: Option<super::pointing::Pointing>,
     /// Overlapping pairs considered.
     pub candidates: usize,
     pub chosen: Vec<PairChoice>,
@@ -319,7 +327,7 @@ pub fn reconstruct_many(
     progress: &dyn Progress,
 ) -> Result<ReconstructManySummary> {
     let start = Instant::now();
-    let (mut summary, grids) = plan(opts)?;
+    let (mut summary, grids) = plan(opts, progress)?;
     if opts.dry_run {
         return Ok(summary);
     }
@@ -349,12 +357,41 @@ struct Grids {
 
 /// Everything decided before any work: the inputs checked, the views, the chosen pairs and the
 /// grid.
-fn plan(opts: &ReconstructManyOptions) -> Result<(ReconstructManySummary, Grids)> {
+fn plan(
+    opts: &ReconstructManyOptions,
+    progress: &dyn Progress,
+) -> Result<(ReconstructManySummary, Grids)> {
     check_outputs(opts)?;
     let zone = scene_zone(opts)?;
-    let views = open_views(opts, zone)?;
+    let mut views = open_views(opts, zone, progress)?;
     check_distinct(&views)?;
     check_overlaps(&views)?;
+    let pointing = if opts.adjust_pointing && !opts.dry_run {
+        // The adjusted cameras are the work folder's first content: it is this run's from now.
+        crate::provenance::claim(
+            &opts.work_dir(),
+            &crate::provenance::RunRecord::of_many(opts),
+        )?;
+        match adjust_cameras(opts, &mut views, zone, progress) {
+            Ok(p) => Some(p),
+            // Cameras that carry the scene's altitudes can go on as given, said loudly.
+            Err(e) if given_range(opts, &views)?.is_some() => {
+                progress.note(&format!(
+                    "warning: the cameras' pointing was not corrected ({}); they are used as given",
+                    crate::outputs::one_line(&e)
+                ));
+                None
+            }
+            Err(e) => {
+                return Err(e.context(
+                    "the scene's altitudes could not be found from tie points: give them with \
+                     --alt-range MIN:MAX",
+                ))
+            }
+        }
+    } else {
+        None
+    };
     let alt = middle_altitude(opts, &views)?;
     let ranked = rank_pairs(&views, zone, alt)?;
     let chosen = choose_pairs(&ranked, opts.pairs)?;
@@ -362,6 +399,7 @@ fn plan(opts: &ReconstructManyOptions) -> Result<(ReconstructManySummary, Grids)
     let work = opts.work_dir();
     let summary = ReconstructManySummary {
         views,
+        pointing,
         candidates: ranked.len(),
         chosen,
         pairs: Vec::new(),
@@ -562,6 +600,8 @@ fn pair_options(
     o.max_memory = opts.max_memory;
     o.shard = Shard::ALL;
     o.both_views = opts.both_views;
+    // The cameras were adjusted all together (or are used as given).
+    o.adjust_pointing = false;
     // The pairs level the ground as `reconstruct` does (the right image sheared): they measure
     // more cells, which the confidence rule turns into a gain (ten dev images: 0.807 m / 99.1 %
     // / 84.0 % within 1 m against 0.803 m / 98.8 % / 83.6 % unsheared; the count rule lost with
@@ -738,7 +778,11 @@ fn rpc_json(opts: &ReconstructManyOptions, image: &Path) -> Result<Option<PathBu
 }
 
 /// Opens every image and its camera, metadata and footprint.
-fn open_views(opts: &ReconstructManyOptions, zone: UtmZone) -> Result<Vec<View>> {
+fn open_views(
+    opts: &ReconstructManyOptions,
+    zone: UtmZone,
+    progress: &dyn Progress,
+) -> Result<Vec<View>> {
     if opts.images.len() < 2 {
         bail!(
             "reconstruct-many needs two or more images of the area, got {}{}: give every \
@@ -756,7 +800,7 @@ fn open_views(opts: &ReconstructManyOptions, zone: UtmZone) -> Result<Vec<View>>
         let rpc = camera_of(image, raw.rpc.clone(), json.as_deref(), "input")?;
         let Acquisition { date, sun } = match &json {
             Some(j) => json_metadata(j)?,
-            None => Acquisition::default(),
+            None => delivered_metadata(image, progress)?,
         };
         let (alt_range, _) = altitude_range(opts.alt_range, &rpc, &rpc)?;
         let (w, h) = raw.size();
@@ -773,6 +817,138 @@ fn open_views(opts: &ReconstructManyOptions, zone: UtmZone) -> Result<Vec<View>>
         });
     }
     Ok(views)
+}
+
+/// Adjusts every view's camera from tie points, writes the corrected cameras as RPC JSON under
+/// the work folder and points the views at them (their altitudes: the user's, else the
+/// cameras', else the tie points'). A resumed run whose work folder holds the adjustment of the
+/// same images reads it back instead.
+fn adjust_cameras(
+    opts: &ReconstructManyOptions,
+    views: &mut [View],
+    zone: UtmZone,
+    progress: &dyn Progress,
+) -> Result<super::pointing::Pointing> {
+    use super::pointing::{adjust_views, describe, tie_pairs, write_camera_json, TieView};
+    let dir = opts.work_dir().join("cameras");
+    let record = dir.join("adjustment.json");
+    let images: Vec<PathBuf> = views
+        .iter()
+        .map(|v| crate::outputs::resolve(&v.image))
+        .collect();
+    let names: Vec<String> = views
+        .iter()
+        .map(|v| file_stem(&v.image))
+        .collect::<Result<_>>()?;
+    let cameras: Vec<PathBuf> = names
+        .iter()
+        .map(|n| dir.join(format!("{n}.json")))
+        .collect();
+    let given = given_range(opts, views)?;
+    let pointing = match read_adjustment(&record, &images) {
+        Some(p) if cameras.iter().all(|c| c.is_file()) => {
+            progress.note("pointing: the cameras adjusted by an earlier run of this work folder");
+            p
+        }
+        _ => {
+            let alt = given.map_or_else(
+                || views.iter().map(|v| v.rpc.alt_offset).sum::<f64>() / views.len() as f64,
+                |(lo, hi)| 0.5 * (lo + hi),
+            );
+            let days: Vec<Option<f64>> = views.iter().map(|v| v.day).collect();
+            let pairs = tie_pairs(&days, |i, j| {
+                super::select::intersect(views[i].footprint, views[j].footprint).is_some()
+            });
+            progress.note(&format!(
+                "pointing: tying {} pairs of the {} images, then one bundle adjustment",
+                pairs.len(),
+                views.len()
+            ));
+            let tie_views: Vec<TieView> = views
+                .iter()
+                .map(|v| {
+                    let raw = RawImage::open(&v.image, "input")?;
+                    TieView::read(&raw, &v.rpc)
+                })
+                .collect::<Result<_>>()?;
+            let p = adjust_views(&tie_views, &pairs, camera::Gauge::MeanZero, alt)
+                .context("the bundle adjustment of the cameras")?;
+            std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+            let range = given.unwrap_or(p.alt_range);
+            for ((v, fit), path) in views.iter().zip(&p.images).zip(&cameras) {
+                let rpc = v.rpc.translated(fit.col_shift, fit.row_shift);
+                write_camera_json(path, &rpc, fit, range, v.date.as_deref(), v.sun)?;
+            }
+            crate::stage::write_json(
+                &record,
+                &serde_json::json!({ "images": images, "pointing": p }),
+            )?;
+            p
+        }
+    };
+    for line in describe(&pointing, &names) {
+        progress.note(&format!("pointing: {line}"));
+    }
+    let (range, source) = match given {
+        Some(r) => (r, "given"),
+        None => (pointing.alt_range, "tie points"),
+    };
+    progress.note(&format!(
+        "altitudes: {:.1} to {:.1} m ({source})",
+        range.0, range.1
+    ));
+    for (v, path) in views.iter_mut().zip(&cameras) {
+        v.rpc = crate::dsm::read_camera(path)?;
+        v.rpc_file = Some(path.clone());
+        let (w, h) = RawImage::open(&v.image, "input")?.size();
+        v.footprint = footprint(&v.rpc, Roi::full(w, h), range, zone)
+            .with_context(|| format!("the ground footprint of {}", v.image.display()))?;
+    }
+    Ok(pointing)
+}
+
+/// The altitudes the user or every camera gives (the union of the cameras' ranges).
+fn given_range(opts: &ReconstructManyOptions, views: &[View]) -> Result<Option<(f64, f64)>> {
+    let mut range: Option<(f64, f64)> = None;
+    for v in views {
+        let Some(((lo, hi), _)) =
+            crate::rectify::given_altitude_range(opts.alt_range, &v.rpc, &v.rpc)?
+        else {
+            return Ok(None);
+        };
+        range = Some(range.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+    }
+    Ok(range)
+}
+
+/// The adjustment recorded in a work folder, if it is of these images.
+fn read_adjustment(record: &Path, images: &[PathBuf]) -> Option<super::pointing::Pointing> {
+    #[derive(serde::Deserialize)]
+    struct Record {
+        images: Vec<PathBuf>,
+        pointing: super::pointing::Pointing,
+    }
+    let text = std::fs::read_to_string(record).ok()?;
+    let r: Record = serde_json::from_str(&text).ok()?;
+    (r.images == images).then_some(r.pointing)
+}
+
+/// The date and sun of an image as delivered: its metadata sidecar (`.IMD`, DIMAP) or the NITF
+/// date in its TIFF tags; a warning when none gives a date (the pairs are then chosen without
+/// it).
+fn delivered_metadata(image: &Path, progress: &dyn Progress) -> Result<Acquisition> {
+    let found = camera::metadata_of(image)
+        .with_context(|| format!("the acquisition metadata of {}", image.display()))?;
+    let date = found.as_ref().and_then(|a| a.datetime.clone());
+    if date.is_none() {
+        progress.note(&format!(
+            "warning: {}: no acquisition date (no .IMD or DIMAP metadata beside it, no NITF date \
+             in its tags): its pairs are chosen without it",
+            image.display()
+        ));
+    }
+    let sun = found.and_then(|a| a.sun_elevation.zip(a.sun_azimuth));
+    Ok(Acquisition { date, sun })
 }
 
 /// The middle of the scene's altitudes (the user's, else the cameras').

@@ -81,6 +81,11 @@ pub struct ReconstructOptions {
     /// the 45 dev pairs it wins in every bin; `reconstruct-many` turns it off for its pairs,
     /// whose fusion it does not help (BENCHMARKS.md).
     pub level_ground: bool,
+    /// Correct the relative pointing error of the pair from tie points (the right camera
+    /// translated; [`super::pointing`]) and take the scene's altitudes from them when neither
+    /// `alt_range` nor the cameras give any. `reconstruct-many` turns it off for its pairs,
+    /// whose cameras it has adjusted all together.
+    pub adjust_pointing: bool,
 }
 
 impl ReconstructOptions {
@@ -121,6 +126,7 @@ impl ReconstructOptions {
             keep_intermediates: false,
             both_views: true,
             level_ground: true,
+            adjust_pointing: true,
         }
     }
 
