@@ -11,6 +11,9 @@ use seasonstereo::Gridding;
 
 use crate::errors::{exception, value_error};
 
+/// The most worker threads a call may ask for: far beyond any core count, each one a stack.
+const MAX_THREADS: usize = 1024;
+
 /// The keywords of one call, taken one by one; any left at the end were misspelt.
 pub struct Keywords<'py>(Bound<'py, PyDict>);
 
@@ -79,8 +82,15 @@ impl<'py> Keywords<'py> {
     }
 
     /// `threads`: the worker threads of this call (default: every core, shared by all calls).
+    /// Refused above [`MAX_THREADS`] before any is started.
     pub fn threads(&self) -> PyResult<Option<usize>> {
-        self.take("threads")
+        let threads = self.take("threads")?;
+        match threads {
+            Some(n) if n > MAX_THREADS => Err(value_error(format!(
+                "threads must be between 1 and {MAX_THREADS}, got {n}"
+            ))),
+            _ => Ok(threads),
+        }
     }
 
     /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none) over

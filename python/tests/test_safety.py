@@ -85,3 +85,173 @@ def test_failed_tiles_warn_when_some_and_raise_when_all(cli, tmp_path):
     with pytest.raises(seasonstereo.NothingProduced, match="no DSM written"):
         seasonstereo.reconstruct(out=nothing, tile=256, **scene)
     assert not nothing.exists() and issubclass(seasonstereo.NothingProduced, RuntimeError)
+
+
+# Issue 51: no panic reachable from input. Every entry point with bad values: each raises the
+# fitting exception with one clear line (never a PanicException, a backtrace or a Rust type
+# name), before any work. Table-driven; the files are made once.
+
+RUST_WORDS = ("ImageArray", "F32", "U16", "PathBuf", "Vec<", "usize", "u64", "f64", "i32",
+              "panicked", "backtrace", "Rust", "index out of bounds")
+TEXTURE = np.random.default_rng(5).random((40, 50)).astype(np.float32)
+HUGE = np.broadcast_to(np.zeros((1, 1), np.float32), (200_000, 200_000))
+
+
+@pytest.fixture(scope="module")
+def bad(tmp_path_factory):
+    """Bad files, by name: missing, a folder, empty, garbage TIFF, malformed cameras."""
+    d = tmp_path_factory.mktemp("bad")
+    files = {"missing": d / "missing.tif", "folder": d / "folder", "empty": d / "empty.tif",
+             "garbage": d / "garbage.tif", "json": d / "cam.json", "rpc_wrong": d / "wrong.json",
+             "rpb": d / "cam.RPB", "imd": d / "cam.IMD", "out": d / "out" / "dsm.tif"}
+    files["folder"].mkdir()
+    files["empty"].write_bytes(b"")
+    files["garbage"].write_bytes(b"II*\x00" + b"\xa5" * 300)
+    files["json"].write_text('{"rpc": {"LINE_OFF": ')
+    files["rpc_wrong"].write_text('{"rpc": {"LINE_OFF": "north", "SAMP_OFF": []}}')
+    files["rpb"].write_text("satId = \"WV03\";\nBEGIN_GROUP = IMAGE\n\tlineOffset = ;\n")
+    files["imd"].write_text("version = \"AA\";\nBEGIN_GROUP = IMAGE_1\nEND_GROUP\n")
+    return files
+
+
+P = seasonstereo
+CASES = {
+    # predict: arrays and values
+    "predict None": (lambda b: P.predict(None, TEXTURE), TypeError),
+    "predict int": (lambda b: P.predict(3, TEXTURE), TypeError),
+    "predict dict": (lambda b: P.predict({}, TEXTURE), TypeError),
+    "predict bytes": (lambda b: P.predict(b"\x00" * 8, TEXTURE), TypeError),
+    "predict object array": (lambda b: P.predict(np.full((4, 4), None), TEXTURE), TypeError),
+    "predict NaN": (lambda b: P.predict(np.full((40, 50), np.nan), TEXTURE, (0, 4)), ValueError),
+    "predict inf": (lambda b: P.predict(TEXTURE, TEXTURE * np.inf, (0, 4)), ValueError),
+    "predict 0x0": (lambda b: P.predict(np.zeros((0, 0)), np.zeros((0, 0)), (0, 4)), ValueError),
+    "predict 0xN": (lambda b: P.predict(np.zeros((0, 50)), np.zeros((0, 50))), ValueError),
+    "predict 1-d": (lambda b: P.predict(TEXTURE.ravel(), TEXTURE.ravel(), (0, 4)), ValueError),
+    "predict 4-d": (lambda b: P.predict(TEXTURE[None, :, :, None], TEXTURE, (0, 4)), ValueError),
+    "predict sizes differ": (lambda b: P.predict(TEXTURE, TEXTURE[:, :40], (0, 4)), ValueError),
+    "predict huge image": (lambda b: P.predict(HUGE, HUGE, (0, 4)), ValueError),
+    "predict huge range": (lambda b: P.predict(TEXTURE, TEXTURE, (-2**31, 2**31 - 1)),
+                           ValueError),
+    "predict range too big for int": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 2**40)),
+                                      (TypeError, OverflowError)),
+    "predict range reversed": (lambda b: P.predict(TEXTURE, TEXTURE, (4, 0)), ValueError),
+    "predict range str": (lambda b: P.predict(TEXTURE, TEXTURE, "0:4"), TypeError),
+    "predict range None in it": (lambda b: P.predict(TEXTURE, TEXTURE, (0, None)), TypeError),
+    "predict threads 0": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), threads=0), ValueError),
+    "predict threads huge": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), threads=10**6),
+                             ValueError),
+    "predict threads negative": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), threads=-1),
+                                 TypeError),
+    "predict census huge": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), census="999x999"),
+                            ValueError),
+    "predict census garbage": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), census="x"),
+                               ValueError),
+    "predict max_memory NaN": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4),
+                                                   max_memory=float("nan")), ValueError),
+    "predict progress int": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), progress=3),
+                             TypeError),
+    "predict method None": (lambda b: P.predict(TEXTURE, TEXTURE, (0, 4), method=None),
+                            TypeError),
+    # read_dsm, score: files
+    "read_dsm None": (lambda b: P.read_dsm(None), TypeError),
+    "read_dsm int": (lambda b: P.read_dsm(3), TypeError),
+    "read_dsm missing": (lambda b: P.read_dsm(b["missing"]), FileNotFoundError),
+    "read_dsm folder": (lambda b: P.read_dsm(b["folder"]), (OSError, ValueError)),
+    "read_dsm empty": (lambda b: P.read_dsm(b["empty"]), (OSError, ValueError)),
+    "read_dsm garbage": (lambda b: P.read_dsm(b["garbage"]), (OSError, ValueError)),
+    "read_dsm zone": (lambda b: P.read_dsm(b["garbage"], "99Q"), ValueError),
+    "score garbage": (lambda b: P.score(b["garbage"], b["garbage"]), (OSError, ValueError)),
+    "score dict": (lambda b: P.score({}, b["garbage"]), TypeError),
+    # dsm, rectify: files and cameras
+    "dsm missing": (lambda b: P.dsm(b["missing"], b["missing"], b["json"], b["json"], b["out"]),
+                    FileNotFoundError),
+    "dsm malformed json": (lambda b: P.dsm(TEXTURE, b["garbage"], b["json"], b["json"],
+                                           b["out"]), (OSError, ValueError)),
+    "dsm bad camera dict": (lambda b: P.dsm(TEXTURE, b["garbage"], {"rpc": 3}, {}, b["out"]),
+                            (OSError, ValueError)),
+    "dsm resolution 0": (lambda b: P.dsm(TEXTURE, b["garbage"], b["json"], b["json"], b["out"],
+                                         resolution=0.0), (OSError, ValueError)),
+    "rectify missing": (lambda b: P.rectify(b["missing"], b["missing"], b["out"]),
+                        FileNotFoundError),
+    "rectify garbage": (lambda b: P.rectify(b["garbage"], b["garbage"], b["out"]),
+                        (OSError, ValueError)),
+    "rectify rpb": (lambda b: P.rectify(b["garbage"], b["garbage"], b["out"], rpc_left=b["rpb"],
+                                        rpc_right=b["imd"]), (OSError, ValueError)),
+    "rectify roi negative": (lambda b: P.rectify(b["garbage"], b["garbage"], b["out"],
+                                                 roi=(-1, 0, 5, 5)), (TypeError, OverflowError)),
+    # reconstruct: files, types and values
+    "reconstruct None": (lambda b: P.reconstruct(None, None, out=b["out"]), TypeError),
+    "reconstruct out None": (lambda b: P.reconstruct(b["garbage"], b["garbage"], out=None),
+                             TypeError),
+    "reconstruct missing": (lambda b: P.reconstruct(b["missing"], b["missing"], out=b["out"]),
+                            FileNotFoundError),
+    "reconstruct folder": (lambda b: P.reconstruct(b["folder"], b["folder"], out=b["out"]),
+                           (OSError, ValueError)),
+    "reconstruct empty": (lambda b: P.reconstruct(b["empty"], b["empty"], out=b["out"]),
+                          (OSError, ValueError)),
+    "reconstruct malformed json": (lambda b: P.reconstruct(
+        b["garbage"], b["garbage"], out=b["out"], rpc_left=b["json"], rpc_right=b["rpc_wrong"]),
+        (OSError, ValueError)),
+    "reconstruct rpb": (lambda b: P.reconstruct(b["garbage"], b["garbage"], out=b["out"],
+                                                rpc_left=b["rpb"], rpc_right=b["imd"]),
+                        (OSError, ValueError)),
+    "reconstruct tile str": (lambda b: P.reconstruct(b["garbage"], b["garbage"], out=b["out"],
+                                                     tile="big"), TypeError),
+    "reconstruct max_memory": (lambda b: P.reconstruct(b["garbage"], b["garbage"], out=b["out"],
+                                                       max_memory=-1.0), ValueError),
+    "reconstruct shard": (lambda b: P.reconstruct(b["garbage"], b["garbage"], out=b["out"],
+                                                  shard="3/2"), ValueError),
+    "reconstruct unknown": (lambda b: P.reconstruct(b["garbage"], b["garbage"], out=b["out"],
+                                                    tyle=256), TypeError),
+    # reconstruct_many: lists, types, values
+    "many empty": (lambda b: P.reconstruct_many([], out=b["out"]), ValueError),
+    "many empty native": (lambda b: P._native.reconstruct_many([], out=b["out"]), ValueError),
+    "many one": (lambda b: P.reconstruct_many([b["garbage"]], out=b["out"]), ValueError),
+    "many duplicates": (lambda b: P.reconstruct_many([b["garbage"]] * 3, out=b["out"]),
+                        (OSError, ValueError)),
+    "many missing": (lambda b: P.reconstruct_many([b["missing"]] * 2, out=b["out"]),
+                     FileNotFoundError),
+    "many empty files": (lambda b: P.reconstruct_many([b["empty"], b["garbage"]], out=b["out"]),
+                         (OSError, ValueError)),
+    "many None": (lambda b: P.reconstruct_many(None, out=b["out"]), TypeError),
+    "many int": (lambda b: P.reconstruct_many(3, out=b["out"]), TypeError),
+    "many dict": (lambda b: P.reconstruct_many({}, out=b["out"]), TypeError),
+    "many bytes": (lambda b: P.reconstruct_many(b"a.tif", out=b["out"]), TypeError),
+    "many pattern": (lambda b: P.reconstruct_many(str(b["folder"] / "*.tif"), out=b["out"]),
+                     ValueError),
+    "many rpc_dir json": (lambda b: P.reconstruct_many([b["garbage"], b["empty"]], b["json"],
+                                                       out=b["out"]), (OSError, ValueError)),
+    "many pairs str": (lambda b: P.reconstruct_many([b["garbage"]] * 2, out=b["out"],
+                                                    pairs="all"), TypeError),
+    "many shard": (lambda b: P.reconstruct_many([b["garbage"]] * 2, out=b["out"], shard="0/0"),
+                   ValueError),
+    "many alt_range": (lambda b: P.reconstruct_many([b["garbage"]] * 2, out=b["out"],
+                                                    alt_range=(1.0,)), TypeError),
+    "many progress": (lambda b: P.reconstruct_many([b["garbage"]] * 2, out=b["out"],
+                                                   progress="yes"), TypeError),
+}
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_bad_input_raises_one_clear_line_never_a_panic(name, bad, capfd):
+    call, expected = CASES[name]
+    with pytest.raises(Exception) as raised:
+        call(bad)
+    error = raised.value
+    assert isinstance(error, expected), f"{type(error).__name__}: {error}"
+    message = str(error)
+    assert "\n" not in message and message.strip(), repr(message)
+    assert not any(word in message for word in RUST_WORDS), message
+    said = capfd.readouterr().err
+    assert "panicked" not in said and "backtrace" not in said, said
+
+
+@pytest.mark.parametrize("shape", [(1, 50), (40, 1), (1, 1), (2, 2)])
+def test_tiny_images_give_a_disparity_or_a_value_error(shape):
+    image = np.random.default_rng(2).random(shape).astype(np.float32)
+    try:
+        d = seasonstereo.predict(image, image, (0, 4))
+    except ValueError as e:
+        assert "\n" not in str(e)
+    else:
+        assert d.shape == shape and d.dtype == np.float32

@@ -48,7 +48,7 @@ use crate::eval::align::{align, AlignParams};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
 use crate::outputs::{check_output_file, check_output_folder};
-use crate::progress::Progress;
+use crate::progress::{Progress, Sequence};
 use crate::rectify::{altitude_range, camera_of, file_stem};
 use crate::stage::write_json;
 
@@ -319,7 +319,10 @@ pub fn reconstruct_many(
     progress: &dyn Progress,
 ) -> Result<ReconstructManySummary> {
     let start = Instant::now();
+    progress.begin("selecting pairs", 1);
     let (mut summary, grids) = plan(opts)?;
+    progress.advance(1);
+    progress.end();
     if opts.dry_run {
         return Ok(summary);
     }
@@ -383,13 +386,9 @@ fn run_pairs(
     grids: &Grids,
     progress: &dyn Progress,
 ) {
+    let shown = Sequence::new(progress, "matching pair", summary.chosen.len());
     for (k, pair) in summary.chosen.iter().enumerate() {
-        let shown = PairProgress {
-            inner: progress,
-            index: k,
-            total: summary.chosen.len(),
-            steps: std::sync::atomic::AtomicUsize::new(1),
-        };
+        shown.enter(k);
         let mut pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
         if opts.shard != Shard::ALL {
             pair_opts.shard = shard_of_pair(opts.shard, k);
@@ -486,38 +485,6 @@ fn fusion_params(opts: &ReconstructManyOptions, pairs: usize, confident: bool) -
 /// 1.05, 0.93, 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
 pub fn auto_min_support(pairs: usize) -> usize {
     (pairs.div_ceil(4)).max(2).min(pairs.max(1))
-}
-
-/// Shows each pair's tiles as one stretch of a bar over all pairs.
-struct PairProgress<'a> {
-    inner: &'a dyn Progress,
-    index: usize,
-    total: usize,
-    /// Steps of the pair's current loop.
-    steps: std::sync::atomic::AtomicUsize,
-}
-
-/// Positions of a bar per pair.
-const PAIR_SCALE: usize = 1000;
-
-impl Progress for PairProgress<'_> {
-    fn begin(&self, _label: &str, total: usize) {
-        self.steps
-            .store(total.max(1), std::sync::atomic::Ordering::Relaxed);
-        self.inner.begin(
-            &format!("pairs ({}/{})", self.index + 1, self.total),
-            self.total * PAIR_SCALE,
-        );
-        self.inner.advance(self.index * PAIR_SCALE);
-    }
-    fn advance(&self, done: usize) {
-        let steps = self.steps.load(std::sync::atomic::Ordering::Relaxed);
-        self.inner
-            .advance(self.index * PAIR_SCALE + done.min(steps) * PAIR_SCALE / steps);
-    }
-    fn end(&self) {
-        self.inner.end();
-    }
 }
 
 /// The shard of pair `k`'s tiles that the run's `shard` takes: its tiles at positions `p` with
