@@ -143,6 +143,13 @@ def _image(name: str, image: Any) -> np.ndarray:
     return image.astype(np.float32)
 
 
+def _text(name: str, value: Any) -> str:
+    """``value``, a ``TypeError`` naming ``name`` unless it is a string."""
+    if not isinstance(value, str):
+        raise TypeError(f"{name} is a string, got {type(value).__name__}")
+    return value
+
+
 def _images(images: Any) -> list:
     """The images of :func:`reconstruct_many` as a list of paths: a list (or other iterable) of
     paths as it is, one path as a list of it, a glob pattern (``*``, ``?``, ``[``) as the files
@@ -185,6 +192,15 @@ def predict(left: np.ndarray, right: np.ndarray, disparity_range: Optional[Tuple
     matching would need more is refused with ``ValueError`` before anything is allocated.
     ``progress``: see the module's help."""
     left, right = _image("left", left), _image("right", right)
+    _text("method", method)
+    if disparity_range is not None:
+        if (isinstance(disparity_range, (str, bytes)) or not hasattr(disparity_range, "__len__")
+                or len(disparity_range) != 2
+                or not all(isinstance(d, (int, np.integer)) for d in disparity_range)):
+            raise TypeError("disparity_range is None or (min, max), two integers, got "
+                            f"{disparity_range!r}")
+        if not all(-2**31 <= d < 2**31 for d in disparity_range):
+            raise ValueError(f"disparity_range {tuple(disparity_range)} is beyond ±2³¹ pixels")
     with _reporting(progress) as callback:
         return _native.predict(left, right, disparity_range, method, callback, **options)
 
@@ -251,6 +267,7 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     ``overwrite=True`` or it is the DSM of an earlier run of the same ``work`` folder (resumed).
     When every tile failed, nothing is written and :class:`NothingProduced` is raised; when only
     some failed, the call returns with them in ``tiles["failed"]`` and a warning."""
+    _text("method", method)
     with _cameras(rpc_left, rpc_right) as (l, r, _), _reporting(progress) as callback:
         summary = _native.reconstruct(left, right, out=out, method=method, overwrite=overwrite,
                                       progress=callback, rpc_left=l, rpc_right=r, **options)
@@ -287,6 +304,7 @@ def reconstruct_many(images: "Union[PathLike, Iterable[PathLike]]", rpc_dir: Opt
     earlier run of the same work folder is resumed); no pair producing a DSM
     :class:`NothingProduced`."""
     images = _images(images)
+    _text("method", method)
     with _reporting(progress) as callback:
         summary = _native.reconstruct_many(images, rpc_dir, out=out, method=method,
                                            overwrite=overwrite, progress=callback, **options)

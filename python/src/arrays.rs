@@ -4,10 +4,7 @@
 //! here.
 
 use numpy::ndarray::{Array2, ArrayViewD};
-use numpy::{
-    IntoPyArray, PyArray2, PyReadonlyArrayDyn, PyUntypedArray,
-    PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use seasonstereo::Image;

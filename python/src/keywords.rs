@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use seasonstereo::flags::{self, ClassicalFlags};
@@ -35,10 +35,16 @@ impl<'py> Keywords<'py> {
         if value.is_none() {
             return Ok(None);
         }
-        value
-            .extract()
-            .map(Some)
-            .map_err(|e| PyTypeError::new_err(format!("option {key}: {}", e.value(value.py()))))
+        value.extract().map(Some).map_err(|e| {
+            let py = value.py();
+            let message = format!("option {key}: {}", e.value(py));
+            // A number out of the option's range (a negative count) is a bad value, not type.
+            if e.is_instance_of::<PyOverflowError>(py) {
+                value_error(message)
+            } else {
+                PyTypeError::new_err(message)
+            }
+        })
     }
 
     /// A path option (`str` or `os.PathLike`).
@@ -64,7 +70,8 @@ impl<'py> Keywords<'py> {
     pub fn classical(&self, method: &str) -> PyResult<ClassicalFlags> {
         let d = ClassicalFlags::default();
         let census = match self.take::<String>("census")? {
-            Some(c) => flags::census_window(&c).map_err(value_error)?,
+            Some(c) => flags::census_window(&c)
+                .map_err(|e| value_error(format!("census is \"WxH\", e.g. \"5x5\": {e}")))?,
             None => d.census,
         };
         Ok(ClassicalFlags {

@@ -112,7 +112,7 @@ def test_other_images_raise_type_error_naming_python_types(image):
 def test_the_native_module_names_numpy_types_too():
     with pytest.raises(TypeError) as refused:
         seasonstereo._native.predict(PAIR.astype(np.float64), PAIR, (0, 4))
-    assert "float32, uint8 or uint16, got a numpy array of <f8" in one_clear_line(refused.value)
+    assert "float32, uint8 or uint16, got a numpy array of float64" in one_clear_line(refused.value)
 
 
 def test_one_path_is_one_image_not_its_characters(tmp_path):
@@ -121,7 +121,7 @@ def test_one_path_is_one_image_not_its_characters(tmp_path):
     for given in (str(image), image):
         with pytest.raises(ValueError) as refused:
             seasonstereo.reconstruct_many(given, out=tmp_path / "dsm.tif")
-        assert "got 1 (" in one_clear_line(refused.value) and "img.tif" in str(refused.value)
+        assert f"got 1 ({image})" in one_clear_line(refused.value)
 
 
 def test_a_pattern_matching_nothing_raises_value_error_naming_it(tmp_path):
