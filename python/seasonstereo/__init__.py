@@ -152,13 +152,13 @@ def _text(name: str, value: Any) -> str:
 
 def _images(images: Any) -> list:
     """The images of :func:`reconstruct_many` as a list of paths: a list (or other iterable) of
-    paths as it is, one path as a list of it, a glob pattern (``*``, ``?``, ``[``) as the files
-    it matches, sorted."""
+    paths as it is, one path as a list of it, a glob pattern (``*``, ``?``, ``[``; not an
+    existing file's name) as the files it matches, sorted."""
     if isinstance(images, (str, os.PathLike)):
         path = os.fspath(images)
         if not isinstance(path, str):
             raise TypeError(f"images: a path is a str or os.PathLike of str, got {path!r}")
-        if not any(c in path for c in "*?["):
+        if os.path.exists(path) or not any(c in path for c in "*?["):
             return [path]
         found = sorted(glob.glob(path))
         if not found:
@@ -183,8 +183,8 @@ def predict(left: np.ndarray, right: np.ndarray, disparity_range: Optional[Tuple
             method: str = "mgm", *, progress: Progress = None, **options: Any) -> np.ndarray:
     """The disparity (H×W float32, NaN = invalid) of the rectified pair ``left``, ``right``
     (H×W or H×W×C numpy arrays: float32, uint8 and uint16 as they are, other real numbers,
-    float64 and integers, converted to float32; NaN or infinite values are refused with
-    ``ValueError``), as ``seasonstereo predict``: census + MGM (``method="mgm"``) or SGM over
+    float64 and integers, converted to float32; NaN = no data, as :func:`rectify` writes
+    outside the views, infinite values are refused with ``ValueError``), as ``seasonstereo predict``: census + MGM (``method="mgm"``) or SGM over
     ``disparity_range`` (inclusive pixels; estimated from the images when None). Options:
     ``p1``, ``p2``, ``four_paths``, ``lr_tolerance``, ``p2_adaptive``, ``census`` ("WxH"),
     ``uniqueness``, ``speckle``, ``speckle_diff``; ``threads``, this call's worker threads

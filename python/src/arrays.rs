@@ -1,5 +1,6 @@
 //! numpy arrays in and out: images as `H×W` or `H×W×C` arrays of float32, uint8 or uint16 (the
-//! values kept, as the command line reads them from files), disparities and DSMs as float32.
+//! values kept, as the command line reads them from files; NaN = no data, as `rectify` writes
+//! outside the views), disparities and DSMs as float32.
 //! The Python layer converts other real numbers (float64, integers) to float32 before they get
 //! here.
 
@@ -91,8 +92,8 @@ fn image<T: Copy + Into<f32>>(a: ArrayViewD<'_, T>) -> Result<Image, String> {
             "an empty image ({height}×{width}×{channels}): it needs at least one pixel"
         ));
     }
-    if !a.iter().all(|&v| v.into().is_finite()) {
-        return Err("NaN or infinite values: replace them first (numpy.nan_to_num)".into());
+    if a.iter().any(|&v| v.into().is_infinite()) {
+        return Err("infinite values: mark pixels without data with NaN".into());
     }
     let data = a.iter().map(|&v| v.into()).collect();
     Image::new(width, height, channels, data).map_err(|e| e.to_string())

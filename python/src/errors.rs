@@ -92,3 +92,10 @@ fn panic_message(panic: &(dyn std::any::Any + Send)) -> &str {
         "a panic without message"
     }
 }
+
+/// Panics inside [`compute`] with `message`: how the tests check that a bug in the library
+/// reaches Python as one line, nothing printed. Not part of the API.
+#[pyfunction(name = "_panic_for_tests")]
+pub fn panic_for_tests(py: Python<'_>, message: String) -> PyResult<()> {
+    compute(py, move || -> seasonstereo::Result<()> { panic!("{message}") })
+}

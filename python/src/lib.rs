@@ -37,5 +37,6 @@ fn _seasonstereo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::score, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(many::reconstruct_many, m)?)?;
+    m.add_function(wrap_pyfunction!(errors::panic_for_tests, m)?)?;
     Ok(())
 }

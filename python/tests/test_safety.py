@@ -1,9 +1,15 @@
 """The command line's safety rules from Python: an existing output is refused (the same message)
 unless ``overwrite=True``, a run whose every tile failed raises ``NothingProduced`` and writes
-nothing, one where some failed returns naming them with a warning. On the procedural world."""
+nothing, one where some failed returns naming them with a warning. On the procedural world.
 
+And no panic reachable from input: every entry point with bad values raises the fitting
+exception with one clear line, and a panic that happens anyway is a one-line ``RuntimeError``
+with nothing printed."""
+
+import os
 import struct
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -123,8 +129,9 @@ CASES = {
     "predict dict": (lambda b: P.predict({}, TEXTURE), TypeError),
     "predict bytes": (lambda b: P.predict(b"\x00" * 8, TEXTURE), TypeError),
     "predict object array": (lambda b: P.predict(np.full((4, 4), None), TEXTURE), TypeError),
-    "predict NaN": (lambda b: P.predict(np.full((40, 50), np.nan), TEXTURE, (0, 4)), ValueError),
     "predict inf": (lambda b: P.predict(TEXTURE, TEXTURE * np.inf, (0, 4)), ValueError),
+    "predict -inf": (lambda b: P.predict(np.where(TEXTURE > 0.5, -np.inf, TEXTURE), TEXTURE),
+                     ValueError),
     "predict 0x0": (lambda b: P.predict(np.zeros((0, 0)), np.zeros((0, 0)), (0, 4)), ValueError),
     "predict 0xN": (lambda b: P.predict(np.zeros((0, 50)), np.zeros((0, 50))), ValueError),
     "predict 1-d": (lambda b: P.predict(TEXTURE.ravel(), TEXTURE.ravel(), (0, 4)), ValueError),
@@ -253,13 +260,25 @@ def test_bad_input_raises_one_clear_line_never_a_panic(name, bad, capfd):
     assert "panicked" not in said and "backtrace" not in said, said
 
 
-@pytest.mark.parametrize("shape", [(1, 50), (40, 1), (1, 1), (2, 2)])
-def test_tiny_images_give_a_disparity_or_a_value_error(shape):
+def nan_where(image, where):
+    return np.where(where, np.nan, image).astype(np.float32)
+
+
+@pytest.mark.parametrize("shape,nan,disparity_range", [
+    ((1, 50), False, (0, 4)), ((40, 1), False, (0, 4)), ((1, 1), False, (0, 4)),
+    ((2, 2), False, None), ((1, 50), False, None), ((40, 50), True, (0, 4)),
+    ((40, 50), True, None), ((40, 50), "half", None), ((40, 50), False, (-1000, 1000)),
+])
+def test_odd_images_give_a_disparity_or_a_value_error(shape, nan, disparity_range):
+    """Tiny and all-NaN (no data) images, a range far wider than the image: a disparity of
+    the image's size or a one-line ``ValueError``, never a panic."""
     image = np.random.default_rng(2).random(shape).astype(np.float32)
+    if nan:
+        image = nan_where(image, True if nan is True else image > 0.5)
     try:
-        d = seasonstereo.predict(image, image, (0, 4))
+        d = seasonstereo.predict(image, image, disparity_range)
     except ValueError as e:
-        assert "\n" not in str(e)
+        assert "\n" not in str(e) and not any(w in str(e) for w in RUST_WORDS), str(e)
     else:
         assert d.shape == shape and d.dtype == np.float32
 
@@ -308,3 +327,18 @@ def test_bad_values_on_real_images_are_refused_before_any_work(name, dev, tmp_pa
     assert not any(word in message for word in RUST_WORDS), message
     assert "panicked" not in capfd.readouterr().err
     assert not (tmp_path / "dsm.tif").exists()
+
+
+def test_a_panic_in_the_library_is_one_runtime_error_and_prints_nothing():
+    """Run without RUST_BACKTRACE (set, a developer keeps the default hook and its trace)."""
+    code = ("import seasonstereo\n"
+            "try:\n"
+            "    seasonstereo._native._panic_for_tests('index out of bounds: the len is 0')\n"
+            "except RuntimeError as e:\n"
+            "    print(type(e).__name__, e)\n")
+    env = {k: v for k, v in os.environ.items() if k != "RUST_BACKTRACE"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    said = done.stdout.strip()
+    assert said.startswith("RuntimeError internal error in seasonstereo (please report it): "
+                           "index out of bounds: the len is 0 (at ") and "\n" not in said, said
