@@ -97,5 +97,7 @@ fn panic_message(panic: &(dyn std::any::Any + Send)) -> &str {
 /// reaches Python as one line, nothing printed. Not part of the API.
 #[pyfunction(name = "_panic_for_tests")]
 pub fn panic_for_tests(py: Python<'_>, message: String) -> PyResult<()> {
-    compute(py, move || -> seasonstereo::Result<()> { panic!("{message}") })
+    compute(py, move || -> seasonstereo::Result<()> {
+        panic!("{message}")
+    })
 }

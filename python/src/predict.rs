@@ -41,7 +41,13 @@ pub fn predict<'py>(
     let callback = Callback::new(py, progress)?;
     let result = compute(py, || {
         let source = RangeSource::flag_or_estimate(disparity_range.map(|[lo, hi]| (lo, hi)));
-        let range = source.resolve(&left, &right)?;
+        // The library's message names the command line's flag; this one the keyword.
+        let range = source.resolve(&left, &right).map_err(|e| {
+            seasonstereo::Error::msg(format!(
+                "estimating the disparity range (give one: disparity_range=(min, max)): {}",
+                e.root_cause()
+            ))
+        })?;
         let needed = matcher.memory_bytes(left.size(), range);
         if needed > max_memory {
             return Err(seasonstereo::Error::msg(format!(
