@@ -13,19 +13,31 @@ JSON). Errors are ``FileNotFoundError`` (naming the file), ``FileExistsError`` (
 output without ``overwrite=True``, as the command line's ``--overwrite``), ``OSError``,
 ``ValueError`` (bad values), ``TypeError`` (unknown options) or :class:`NothingProduced` (a run
 whose every tile or pair failed: the command line's exit code 3). A partial run (some tiles or
-pairs failed: exit code 2) returns, names them and issues a ``UserWarning``. Every call releases the GIL while it computes, so
-threads run in parallel; ``progress`` takes a callable ``progress(label, done, total)``, or
-``True`` for tqdm bars when tqdm is installed.
+pairs failed: exit code 2) returns, names them and issues a ``UserWarning``. Messages are one
+line and name Python's types, never the library's; a bug inside the library raises a one-line
+``RuntimeError`` ("internal error"), nothing is printed. Every call releases the GIL while it
+computes, so threads run in parallel.
+
+``progress`` takes a function ``progress(stage, done, total)``: ``stage`` a short string naming
+what runs ("selecting pairs", "matching pair 3/12", "tiles (2 at once)", "fusing", ...),
+``done`` and ``total`` one count of steps (rows, tiles, blocks) over the whole call: neither
+ever goes back, ``total`` grows when a stage whose size was unknown starts (for
+:func:`reconstruct_many`, the pairs × their tiles, then the fusion's blocks) and ``done``
+reaches it when the call returns. It is called when the stage changes or the count gains a
+whole percent, from the library's threads. ``True`` shows one tqdm bar when tqdm is installed,
+else plain lines on stderr (one per stage and every 10 %); ``None`` or ``False``, nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
+import sys
 import tempfile
 import warnings
-from typing import Any, Callable, Iterator, NamedTuple, Optional, Tuple, Union
+from typing import Any, Callable, Iterable, Iterator, NamedTuple, Optional, Tuple, Union
 
 import numpy as np
 
@@ -74,36 +86,123 @@ def _cameras(*cameras: Optional[Camera]) -> Iterator[list]:
         yield paths + [folder]
 
 
-def _progress(progress: Progress) -> Optional[Callable[[str, int, int], Any]]:
-    """The callback of ``progress``: itself, or with ``True`` one tqdm bar per loop (none
-    without tqdm: progress is a nicety, never a dependency)."""
+@contextlib.contextmanager
+def _reporting(progress: Progress) -> Iterator[Optional[Callable[[str, int, int], Any]]]:
+    """The callback of ``progress`` for one call: itself; with ``True`` one tqdm bar over the
+    whole call, or without tqdm plain lines on stderr (one per stage and every 10 %)."""
+    if progress is None or progress is False:
+        yield None
+        return
     if progress is not True:
-        return progress or None
+        if not callable(progress):
+            raise TypeError("progress is a function progress(stage, done, total), True or "
+                            f"None, got {type(progress).__name__}")
+        yield progress
+        return
     try:
         from tqdm import tqdm
     except ImportError:
-        return None
+        tqdm = None
     bar: list = [None]
+    last: list = [None, -1]
 
-    def update(label: str, done: int, total: int) -> None:
-        if done == 0 or bar[0] is None:
-            bar[0] = tqdm(total=total, desc=label, leave=False)
-        bar[0].update(done - bar[0].n)
-        if done >= total:
+    def update(stage: str, done: int, total: int) -> None:
+        if tqdm is not None:
+            if bar[0] is None:
+                bar[0] = tqdm(total=total, desc=stage, unit="step", leave=False)
+            bar[0].total = total
+            bar[0].set_description(stage, refresh=False)
+            bar[0].update(done - bar[0].n)
+            return
+        tenth = 10 * done // max(total, 1)
+        if stage != last[0] or tenth > last[1]:
+            last[0], last[1] = stage, tenth
+            print(f"seasonstereo: {stage}: {done}/{total} ({100 * done // max(total, 1)} %)",
+                  file=sys.stderr, flush=True)
+
+    try:
+        yield update
+    finally:
+        if bar[0] is not None:
             bar[0].close()
 
-    return update
+
+_IMAGE_TYPES = (np.float32, np.uint8, np.uint16)
+
+
+def _image(name: str, image: Any) -> np.ndarray:
+    """``image`` as an array the library takes: float32, uint8 and uint16 as they are, other
+    real numbers (float64, numpy's default, and integers) as float32."""
+    if not isinstance(image, np.ndarray):
+        raise TypeError(f"{name} is a numpy array (H×W or H×W×C), got {type(image).__name__}")
+    if image.dtype in _IMAGE_TYPES:
+        return image
+    if image.dtype.kind not in "biuf":
+        raise TypeError(f"{name} is a numpy array of real numbers (float32, uint8 or uint16; "
+                        f"others are converted to float32), got {image.dtype}")
+    return image.astype(np.float32)
+
+
+def _text(name: str, value: Any) -> str:
+    """``value``, a ``TypeError`` naming ``name`` unless it is a string."""
+    if not isinstance(value, str):
+        raise TypeError(f"{name} is a string, got {type(value).__name__}")
+    return value
+
+
+def _images(images: Any) -> list:
+    """The images of :func:`reconstruct_many` as a list of paths: a list (or other iterable) of
+    paths as it is, one path as a list of it, a glob pattern (``*``, ``?``, ``[``; not an
+    existing file's name) as the files it matches, sorted."""
+    if isinstance(images, (str, os.PathLike)):
+        path = os.fspath(images)
+        if not isinstance(path, str):
+            raise TypeError(f"images: a path is a str or os.PathLike of str, got {path!r}")
+        if os.path.exists(path) or not any(c in path for c in "*?["):
+            return [path]
+        found = sorted(glob.glob(path))
+        if not found:
+            raise ValueError(f"images: no file matches the pattern {path!r}")
+        return found
+    if isinstance(images, (bytes, dict)) or not hasattr(images, "__iter__"):
+        raise TypeError("images is a list of paths (str or os.PathLike), one path or a glob "
+                        f"pattern, got {type(images).__name__}")
+    paths = []
+    for i, image in enumerate(images):
+        if not isinstance(image, (str, os.PathLike)):
+            raise TypeError(f"images[{i}] is a path (str or os.PathLike), got "
+                            f"{type(image).__name__}")
+        path = os.fspath(image)
+        if not isinstance(path, str):
+            raise TypeError(f"images[{i}]: a path is a str or os.PathLike of str, got {path!r}")
+        paths.append(path)
+    return paths
 
 
 def predict(left: np.ndarray, right: np.ndarray, disparity_range: Optional[Tuple[int, int]] = None,
             method: str = "mgm", *, progress: Progress = None, **options: Any) -> np.ndarray:
     """The disparity (H×W float32, NaN = invalid) of the rectified pair ``left``, ``right``
-    (H×W or H×W×C arrays of float32, uint8 or uint16), as ``seasonstereo predict``: census +
-    MGM (``method="mgm"``) or SGM over ``disparity_range`` (inclusive pixels; estimated from the
-    images when None). Options: ``p1``, ``p2``, ``four_paths``, ``lr_tolerance``,
-    ``p2_adaptive``, ``census`` ("WxH"), ``uniqueness``, ``speckle``, ``speckle_diff``; and
-    ``threads``, this call's worker threads (default: every core, shared by all calls)."""
-    return _native.predict(left, right, disparity_range, method, _progress(progress), **options)
+    (H×W or H×W×C numpy arrays: float32, uint8 and uint16 as they are, other real numbers,
+    float64 and integers, converted to float32; NaN = no data, as :func:`rectify` writes
+    outside the views, infinite values are refused with ``ValueError``), as ``seasonstereo predict``: census + MGM (``method="mgm"``) or SGM over
+    ``disparity_range`` (inclusive pixels; estimated from the images when None). Options:
+    ``p1``, ``p2``, ``four_paths``, ``lr_tolerance``, ``p2_adaptive``, ``census`` ("WxH"),
+    ``uniqueness``, ``speckle``, ``speckle_diff``; ``threads``, this call's worker threads
+    (default: every core, shared by all calls); ``max_memory`` (GiB, default 16): a pair whose
+    matching would need more is refused with ``ValueError`` before anything is allocated.
+    ``progress``: see the module's help."""
+    left, right = _image("left", left), _image("right", right)
+    _text("method", method)
+    if disparity_range is not None:
+        if (isinstance(disparity_range, (str, bytes)) or not hasattr(disparity_range, "__len__")
+                or len(disparity_range) != 2
+                or not all(isinstance(d, (int, np.integer)) for d in disparity_range)):
+            raise TypeError("disparity_range is None or (min, max), two integers, got "
+                            f"{disparity_range!r}")
+        if not all(-2**31 <= d < 2**31 for d in disparity_range):
+            raise ValueError(f"disparity_range {tuple(disparity_range)} is beyond ±2³¹ pixels")
+    with _reporting(progress) as callback:
+        return _native.predict(left, right, disparity_range, method, callback, **options)
 
 
 def rectify(left: PathLike, right: PathLike, out: PathLike, *, rpc_left: Optional[Camera] = None,
@@ -115,8 +214,9 @@ def rectify(left: PathLike, right: PathLike, out: PathLike, *, rpc_left: Optiona
     ``alt_range`` (min, max metres), ``stem``. Returns the paths written and the
     ``disparity_range`` for :func:`predict`."""
     with _cameras(rpc_left, rpc_right) as (l, r, _):
-        return _native.rectify(left, right, out, rpc_left=l, rpc_right=r,
-                               progress=_progress(progress), **options)
+        with _reporting(progress) as callback:
+            return _native.rectify(left, right, out, rpc_left=l, rpc_right=r,
+                                   progress=callback, **options)
 
 
 def dsm(disparity: Union[PathLike, np.ndarray], homography: PathLike, rpc_left: Camera,
@@ -167,21 +267,22 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     ``overwrite=True`` or it is the DSM of an earlier run of the same ``work`` folder (resumed).
     When every tile failed, nothing is written and :class:`NothingProduced` is raised; when only
     some failed, the call returns with them in ``tiles["failed"]`` and a warning."""
-    with _cameras(rpc_left, rpc_right) as (l, r, _):
+    _text("method", method)
+    with _cameras(rpc_left, rpc_right) as (l, r, _), _reporting(progress) as callback:
         summary = _native.reconstruct(left, right, out=out, method=method, overwrite=overwrite,
-                                      progress=_progress(progress),
-                                      rpc_left=l, rpc_right=r, **options)
+                                      progress=callback, rpc_left=l, rpc_right=r, **options)
     for line in summary["warnings"]:
         warnings.warn(line, stacklevel=2)
     return summary
 
 
-def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = None, *,
+def reconstruct_many(images: "Union[PathLike, Iterable[PathLike]]", rpc_dir: Optional[PathLike] = None, *,
                      out: PathLike, method: str = "mgm", overwrite: bool = False,
                      progress: Progress = None, **options: Any) -> dict:
     """Many dates, one DSM, as ``seasonstereo reconstruct-many``: scores every overlapping pair
-    of ``images`` (two or more; cameras ``<image stem>.json`` in ``rpc_dir``, else the images'
-    RPC tags), reconstructs the best ``pairs`` and fuses them into ``out`` (with
+    of ``images`` (two or more; a list of paths, or a glob pattern such as
+    ``"images/*.tif"``, expanded and sorted; cameras ``<image stem>.json`` in ``rpc_dir``, else
+    the images' RPC tags), reconstructs the best ``pairs`` and fuses them into ``out`` (with
     ``<out>_count.tif``, ``<out>_spread.tif``, ``<out>_confidence.tif`` and
     ``<out>_report.json`` beside it). Options, with the command's defaults: ``pairs``,
     ``dry_run`` (choose the pairs, write nothing), ``cluster_tolerance``, ``min_support``,
@@ -198,12 +299,15 @@ def reconstruct_many(images: "list[PathLike]", rpc_dir: Optional[PathLike] = Non
     equal-weight fusion and weight in the fusion, seconds), ``fused`` (files,
     grid with ``transform`` and ``crs``, coverage; None on a dry run), ``scores``, ``seconds``
     and ``warnings`` (incomplete pairs, also issued as Python warnings). Fewer than two images
-    raise ``ValueError``; existing outputs ``FileExistsError`` unless ``overwrite=True`` (or an
+    (an empty list, a pattern matching no file) raise ``ValueError``, anything but paths
+    ``TypeError``; existing outputs ``FileExistsError`` unless ``overwrite=True`` (or an
     earlier run of the same work folder is resumed); no pair producing a DSM
     :class:`NothingProduced`."""
-    summary = _native.reconstruct_many([os.fspath(i) for i in images], rpc_dir, out=out,
-                                       method=method, overwrite=overwrite,
-                                       progress=_progress(progress), **options)
+    images = _images(images)
+    _text("method", method)
+    with _reporting(progress) as callback:
+        summary = _native.reconstruct_many(images, rpc_dir, out=out, method=method,
+                                           overwrite=overwrite, progress=callback, **options)
     for line in summary["warnings"]:
         warnings.warn(line, stacklevel=2)
     return summary

@@ -8,6 +8,9 @@ import numpy as np
 import numpy.typing as npt
 
 _Path = Union[str, os.PathLike[str]]
+# progress(stage, done, total): `stage` a short string ("matching pair 3/12", "fusing"), `done`
+# and `total` one count over the whole call, neither going back (`total` grows when a stage of
+# unknown size starts).
 _Progress = Optional[Callable[[str, int, int], Any]]
 _Transform = Tuple[float, float, float, float, float, float]
 _Dsm = Tuple[npt.NDArray[np.float32], _Transform, str]
@@ -34,6 +37,7 @@ def predict(
     speckle: Optional[int] = None,
     speckle_diff: Optional[float] = None,
     threads: Optional[int] = None,
+    max_memory: Optional[float] = None,
 ) -> npt.NDArray[np.float32]: ...
 def rectify(
     left: _Path,

@@ -4,6 +4,7 @@
 
 use std::io::ErrorKind;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Mutex;
 
 use pyo3::create_exception;
 use pyo3::exceptions::{
@@ -52,11 +53,33 @@ pub fn compute<T: Send>(
 ) -> PyResult<T> {
     match py.allow_threads(|| catch_unwind(AssertUnwindSafe(work))) {
         Ok(result) => result.map_err(exception),
-        Err(panic) => Err(PyRuntimeError::new_err(format!(
-            "internal error in seasonstereo (please report it): {}",
-            panic_message(panic.as_ref())
-        ))),
+        Err(panic) => {
+            let at = PANIC_AT.lock().ok().and_then(|mut p| p.take());
+            Err(PyRuntimeError::new_err(format!(
+                "internal error in seasonstereo (please report it): {}{}",
+                panic_message(panic.as_ref()).replace('\n', " "),
+                at.map_or(String::new(), |at| format!(" (at {at})"))
+            )))
+        }
     }
+}
+
+/// Where the last panic was raised, for the exception's message.
+static PANIC_AT: Mutex<Option<String>> = Mutex::new(None);
+
+/// Silences this module's panics (its own copy of the standard library's hook, other
+/// extensions keep theirs): [`compute`] turns them into one-line exceptions, which the default
+/// hook's message and backtrace on stderr would only repeat or bury. With `RUST_BACKTRACE` set
+/// (a developer chasing one) the default hook stays.
+pub fn quiet_panics() {
+    if std::env::var_os("RUST_BACKTRACE").is_some() {
+        return;
+    }
+    std::panic::set_hook(Box::new(|info| {
+        if let (Some(l), Ok(mut at)) = (info.location(), PANIC_AT.lock()) {
+            *at = Some(format!("{}:{}", l.file(), l.line()));
+        }
+    }));
 }
 
 /// The text a panic was raised with.
@@ -68,4 +91,13 @@ fn panic_message(panic: &(dyn std::any::Any + Send)) -> &str {
     } else {
         "a panic without message"
     }
+}
+
+/// Panics inside [`compute`] with `message`: how the tests check that a bug in the library
+/// reaches Python as one line, nothing printed. Not part of the API.
+#[pyfunction(name = "_panic_for_tests")]
+pub fn panic_for_tests(py: Python<'_>, message: String) -> PyResult<()> {
+    compute(py, move || -> seasonstereo::Result<()> {
+        panic!("{message}")
+    })
 }

@@ -42,7 +42,7 @@ pub fn rectify(
         alt_range: alt_range.map(|[lo, hi]| (lo, hi)),
         stem,
     };
-    let callback = Callback::new(progress);
+    let callback = Callback::new(py, progress)?;
     let result = compute(py, || {
         options.check_output()?;
         seasonstereo::rectify(&options, &callback)

@@ -3,13 +3,16 @@
 
 use std::path::PathBuf;
 
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use seasonstereo::flags::{self, ClassicalFlags};
 use seasonstereo::Gridding;
 
 use crate::errors::{exception, value_error};
+
+/// The most worker threads a call may ask for: far beyond any core count, each one a stack.
+const MAX_THREADS: usize = 1024;
 
 /// The keywords of one call, taken one by one; any left at the end were misspelt.
 pub struct Keywords<'py>(Bound<'py, PyDict>);
@@ -32,10 +35,16 @@ impl<'py> Keywords<'py> {
         if value.is_none() {
             return Ok(None);
         }
-        value
-            .extract()
-            .map(Some)
-            .map_err(|e| PyTypeError::new_err(format!("option {key}: {}", e.value(value.py()))))
+        value.extract().map(Some).map_err(|e| {
+            let py = value.py();
+            let message = format!("option {key}: {}", e.value(py));
+            // A number out of the option's range (a negative count) is a bad value, not type.
+            if e.is_instance_of::<PyOverflowError>(py) {
+                value_error(message)
+            } else {
+                PyTypeError::new_err(message)
+            }
+        })
     }
 
     /// A path option (`str` or `os.PathLike`).
@@ -61,7 +70,8 @@ impl<'py> Keywords<'py> {
     pub fn classical(&self, method: &str) -> PyResult<ClassicalFlags> {
         let d = ClassicalFlags::default();
         let census = match self.take::<String>("census")? {
-            Some(c) => flags::census_window(&c).map_err(value_error)?,
+            Some(c) => flags::census_window(&c)
+                .map_err(|e| value_error(format!("census is \"WxH\", e.g. \"5x5\": {e}")))?,
             None => d.census,
         };
         Ok(ClassicalFlags {
@@ -79,8 +89,15 @@ impl<'py> Keywords<'py> {
     }
 
     /// `threads`: the worker threads of this call (default: every core, shared by all calls).
+    /// Refused above [`MAX_THREADS`] before any is started.
     pub fn threads(&self) -> PyResult<Option<usize>> {
-        self.take("threads")
+        let threads = self.take("threads")?;
+        match threads {
+            Some(n) if n > MAX_THREADS => Err(value_error(format!(
+                "threads must be between 1 and {MAX_THREADS}, got {n}"
+            ))),
+            _ => Ok(threads),
+        }
     }
 
     /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none) over

@@ -5,7 +5,7 @@
 //! exceptions, summaries to dicts.
 //!
 //! Every call releases the GIL while it computes (threads run in parallel) and turns a panic
-//! into a `RuntimeError` instead of unwinding into Python. The Python layer
+//! into a one-line `RuntimeError` (no backtrace on stderr) instead of unwinding into Python. The Python layer
 //! (`seasonstereo/__init__.py`) adds the conveniences that are Python's own: RPCs given as
 //! dicts, the `Dsm` named tuple.
 
@@ -24,6 +24,7 @@ mod values;
 /// The functions and the version, as `seasonstereo._seasonstereo`.
 #[pymodule]
 fn _seasonstereo(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    errors::quiet_panics();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add(
         "NothingProduced",
@@ -36,5 +37,6 @@ fn _seasonstereo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::score, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(many::reconstruct_many, m)?)?;
+    m.add_function(wrap_pyfunction!(errors::panic_for_tests, m)?)?;
     Ok(())
 }

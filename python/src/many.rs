@@ -19,7 +19,8 @@ use crate::values::{crs, to_python, transform};
 /// the images' RPC tags), reconstructs each and fuses them into `out`; returns the summary the
 /// report holds (chosen pairs with their score terms, per-pair outcomes, the fused DSM's files,
 /// grid and coverage, scores, seconds) and the warnings (incomplete pairs). `threads`: this
-/// call's worker threads (default: every core, shared by all calls).
+/// call's worker threads (default: every core, shared by all calls). Fewer than two images are
+/// refused here, as the library words it: it reads the first image before it counts them.
 #[pyfunction]
 #[pyo3(signature = (images, rpc_dir=None, *, out, method="mgm", overwrite=false, progress=None, **options))]
 #[allow(clippy::too_many_arguments)] // Python's keywords
@@ -33,12 +34,22 @@ pub fn reconstruct_many(
     progress: Option<Py<PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyObject> {
+    if images.len() < 2 {
+        return Err(value_error(format!(
+            "reconstruct_many needs two or more images of the area, got {}{}: give every \
+             acquisition (or use reconstruct for one pair)",
+            images.len(),
+            images
+                .first()
+                .map_or(String::new(), |p| format!(" ({})", p.display()))
+        )));
+    }
     let keywords = Keywords::new(py, options)?;
     let mut options = many_options(&keywords, method, images, rpc_dir, out)?;
     let threads = keywords.threads()?;
     keywords.finish()?;
     options.overwrite = overwrite;
-    let callback = Callback::new(progress);
+    let callback = Callback::new(py, progress)?;
     let result = compute(py, || {
         let s = seasonstereo::with_threads(threads, || {
             seasonstereo::reconstruct_many(&options, &callback)

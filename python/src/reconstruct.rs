@@ -35,7 +35,7 @@ pub fn reconstruct(
     let options = reconstruct_options(&keywords, method, [left, right], out)?;
     let threads = keywords.threads()?;
     keywords.finish()?;
-    let callback = Callback::new(progress);
+    let callback = Callback::new(py, progress)?;
     let result = compute(py, || {
         options.check_output(overwrite)?;
         seasonstereo::with_threads(threads, || seasonstereo::reconstruct(&options, &callback))

@@ -405,6 +405,8 @@ fn open_pair(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<OpenP
         progress.note("pointing: tying the pair (tie points, then the right camera adjusted)");
         match pointing::adjust_pair((&left, &rpc_left), (&right, &rpc_right), alt) {
             Ok(p) => {
+                let camera = pointing::camera_source(&opts.right, opts.rpc_right.as_deref());
+                pointing::check_fit(&p.images[1], &opts.right, &camera)?;
                 let names = [file_stem(&opts.left)?, file_stem(&opts.right)?];
                 for line in pointing::describe(&p, &names).iter().skip(1) {
                     progress.note(&format!("pointing: {line}"));

@@ -48,7 +48,7 @@ use crate::eval::align::{align, AlignParams};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
 use crate::outputs::{check_output_file, check_output_folder};
-use crate::progress::Progress;
+use crate::progress::{Progress, Sequence};
 use crate::rectify::{altitude_range, camera_of, file_stem};
 use crate::stage::write_json;
 
@@ -327,7 +327,10 @@ pub fn reconstruct_many(
     progress: &dyn Progress,
 ) -> Result<ReconstructManySummary> {
     let start = Instant::now();
+    progress.begin("selecting pairs", 1);
     let (mut summary, grids) = plan(opts, progress)?;
+    progress.advance(1);
+    progress.end();
     if opts.dry_run {
         return Ok(summary);
     }
@@ -375,13 +378,16 @@ fn plan(
         match adjust_cameras(opts, &mut views, zone, progress) {
             Ok(p) => Some(p),
             // Cameras that carry the scene's altitudes can go on as given, said loudly.
-            Err(e) if given_range(opts, &views)?.is_some() => {
+            Err(e)
+                if !e.is::<super::pointing::Misfit>() && given_range(opts, &views)?.is_some() =>
+            {
                 progress.note(&format!(
                     "warning: the cameras' pointing was not corrected ({}); they are used as given",
                     crate::outputs::one_line(&e)
                 ));
                 None
             }
+            Err(e) if e.is::<super::pointing::Misfit>() => return Err(e),
             Err(e) => {
                 return Err(e.context(
                     "the scene's altitudes could not be found from tie points: give them with \
@@ -395,6 +401,16 @@ fn plan(
     let alt = middle_altitude(opts, &views)?;
     let ranked = rank_pairs(&views, zone, alt)?;
     let chosen = choose_pairs(&ranked, opts.pairs)?;
+    progress.note(&format!(
+        "chosen {} of {} overlapping pairs: {}",
+        chosen.len(),
+        ranked.len(),
+        chosen
+            .iter()
+            .map(|p| p.stem.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
     let (fused, pairs) = common_grid(opts, &chosen, zone)?;
     let work = opts.work_dir();
     let summary = ReconstructManySummary {
@@ -422,22 +438,39 @@ fn run_pairs(
     grids: &Grids,
     progress: &dyn Progress,
 ) {
+    let shown = Sequence::new(progress, "matching pair", summary.chosen.len());
     for (k, pair) in summary.chosen.iter().enumerate() {
-        let shown = PairProgress {
-            inner: progress,
-            index: k,
-            total: summary.chosen.len(),
-            steps: std::sync::atomic::AtomicUsize::new(1),
-        };
+        shown.enter(k);
         let mut pair_opts = pair_options(opts, &summary.views, pair, &grids.pairs, &summary.work);
         if opts.shard != Shard::ALL {
             pair_opts.shard = shard_of_pair(opts.shard, k);
             pair_opts.tiles_only = true;
         }
-        summary
-            .pairs
-            .push(run_pair(&pair_opts, &grids.fused, &pair.stem, &shown));
+        let outcome = run_pair(&pair_opts, &grids.fused, &pair.stem, &shown);
+        shown.note(&finished_pair_line(k, summary.chosen.len(), &outcome));
+        summary.pairs.push(outcome);
     }
+}
+
+/// What the log says of a pair when it finishes (the run's summary says more at the end).
+fn finished_pair_line(k: usize, n: usize, p: &PairOutcome) -> String {
+    let scores = p
+        .scores
+        .as_ref()
+        .and_then(|s| s.mae_filtered)
+        .map_or(String::new(), |m| format!(", MAE {m:.3} m vs truth"));
+    let why = p
+        .error
+        .as_deref()
+        .map_or(String::new(), |e| format!(": {e}"));
+    format!(
+        "pair {}/{n} {} {}: {:.1} % of the grid measured{scores}, {:.1} s{why}",
+        k + 1,
+        p.stem,
+        p.status.word(),
+        100.0 * p.measured_share,
+        p.seconds
+    )
 }
 
 /// Fuses the DSMs of the pairs that produced one (registered on the first when asked), writes
@@ -525,38 +558,6 @@ fn fusion_params(opts: &ReconstructManyOptions, pairs: usize, confident: bool) -
 /// 1.05, 0.93, 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
 pub fn auto_min_support(pairs: usize) -> usize {
     (pairs.div_ceil(4)).max(2).min(pairs.max(1))
-}
-
-/// Shows each pair's tiles as one stretch of a bar over all pairs.
-struct PairProgress<'a> {
-    inner: &'a dyn Progress,
-    index: usize,
-    total: usize,
-    /// Steps of the pair's current loop.
-    steps: std::sync::atomic::AtomicUsize,
-}
-
-/// Positions of a bar per pair.
-const PAIR_SCALE: usize = 1000;
-
-impl Progress for PairProgress<'_> {
-    fn begin(&self, _label: &str, total: usize) {
-        self.steps
-            .store(total.max(1), std::sync::atomic::Ordering::Relaxed);
-        self.inner.begin(
-            &format!("pairs ({}/{})", self.index + 1, self.total),
-            self.total * PAIR_SCALE,
-        );
-        self.inner.advance(self.index * PAIR_SCALE);
-    }
-    fn advance(&self, done: usize) {
-        let steps = self.steps.load(std::sync::atomic::Ordering::Relaxed);
-        self.inner
-            .advance(self.index * PAIR_SCALE + done.min(steps) * PAIR_SCALE / steps);
-    }
-    fn end(&self) {
-        self.inner.end();
-    }
 }
 
 /// The shard of pair `k`'s tiles that the run's `shard` takes: its tiles at positions `p` with
@@ -873,6 +874,10 @@ fn adjust_cameras(
                 .collect::<Result<_>>()?;
             let p = adjust_views(&tie_views, &pairs, camera::Gauge::MeanZero, alt)
                 .context("the bundle adjustment of the cameras")?;
+            for (v, fit) in views.iter().zip(&p.images) {
+                let camera = super::pointing::camera_source(&v.image, v.rpc_file.as_deref());
+                super::pointing::check_fit(fit, &v.image, &camera)?;
+            }
             std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
             let range = given.unwrap_or(p.alt_range);
             for ((v, fit), path) in views.iter().zip(&p.images).zip(&cameras) {
