@@ -158,7 +158,7 @@ impl Frame {
 }
 
 /// Projection of a point in metres through camera `rpc` shifted by `t`, with its 2×3 Jacobian
-/// (central differences of 0.5 m: the RPC is smooth at that scale).
+/// (forward differences of 0.5 m: the RPC is smooth at that scale).
 fn project(frame: &Frame, rpc: &RpcModel, t: [f64; 2], x: [f64; 3]) -> ([f64; 2], [[f64; 3]; 2]) {
     let at = |m: [f64; 3]| {
         let g = frame.to_ground(m);
@@ -169,12 +169,11 @@ fn project(frame: &Frame, rpc: &RpcModel, t: [f64; 2], x: [f64; 3]) -> ([f64; 2]
     let mut j = [[0.0; 3]; 2];
     const STEP: f64 = 0.5;
     for k in 0..3 {
-        let (mut a, mut b) = (x, x);
+        let mut a = x;
         a[k] += STEP;
-        b[k] -= STEP;
-        let (pa, pb) = (at(a), at(b));
-        j[0][k] = (pa[0] - pb[0]) / (2.0 * STEP);
-        j[1][k] = (pa[1] - pb[1]) / (2.0 * STEP);
+        let pa = at(a);
+        j[0][k] = (pa[0] - p[0]) / STEP;
+        j[1][k] = (pa[1] - p[1]) / STEP;
     }
     (p, j)
 }
@@ -402,7 +401,7 @@ impl Problem<'_> {
         }
         for j in 0..self.tracks.len() {
             if self.alive[j] {
-                self.refine_point(j, 3);
+                self.refine_point(j, 1);
             }
         }
         Ok(largest)
@@ -576,7 +575,7 @@ pub fn adjust_translations(
     problem.centre = [median(&mut xs), median(&mut ys), initial_alt];
     for round in 0..params.rounds.max(1) {
         for _ in 0..params.iterations {
-            if problem.step()? < 1e-4 {
+            if problem.step()? < 1e-3 {
                 break;
             }
         }

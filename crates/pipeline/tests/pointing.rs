@@ -242,3 +242,55 @@ fn pairs_from_vendor_cameras_40_px_off_are_as_good_as_from_the_vendor_ones() {
         );
     }
 }
+
+/// Every dev pair with its own vendor cameras is accepted; with the right camera of another
+/// image of the area, refused (the calibration of [`MAX_RESIDUAL_PX`]).
+#[test]
+fn a_foreign_camera_is_refused_on_all_45_dev_pairs_and_no_own_camera_is() {
+    use pipeline::reconstruct::pointing::{adjust_pair, check_fit, MAX_RESIDUAL_PX};
+    testdata::require!(JAX_DEV);
+    let raws: Vec<RawImage> = IDS
+        .iter()
+        .map(|id| RawImage::open(&image(id), "input").unwrap())
+        .collect();
+    let cameras: Vec<RpcModel> = IDS.iter().map(|id| vendor(id)).collect();
+    let (mut own, mut foreign) = (Vec::new(), Vec::new());
+    for l in 0..IDS.len() {
+        for r in l + 1..IDS.len() {
+            // Another image than the pair's two.
+            let f = (r + 1..r + IDS.len())
+                .map(|k| k % IDS.len())
+                .find(|&k| k != l)
+                .unwrap();
+            let alt = cameras[l].alt_offset;
+            let fits = |camera: &RpcModel| {
+                adjust_pair((&raws[l], &cameras[l]), (&raws[r], camera), alt).map(|p| p.images[1])
+            };
+            let mine = fits(&cameras[r]).unwrap();
+            assert!(
+                check_fit(&mine, &image(IDS[r]), "own").is_ok(),
+                "{}-{}: {mine:?}",
+                IDS[l],
+                IDS[r]
+            );
+            own.push(mine.rms_px);
+            // Too few tie points to adjust is a refusal too.
+            match fits(&cameras[f]) {
+                Ok(theirs) => {
+                    assert!(
+                        check_fit(&theirs, &image(IDS[r]), "foreign").is_err(),
+                        "{}-{} with {}'s camera: {theirs:?}",
+                        IDS[l],
+                        IDS[r],
+                        IDS[f]
+                    );
+                    foreign.push(theirs.rms_px);
+                }
+                Err(e) => eprintln!("{}-{} with {}'s camera: {e:#}", IDS[l], IDS[r], IDS[f]),
+            }
+        }
+    }
+    let max_own = own.iter().cloned().fold(0.0, f64::max);
+    let min_foreign = foreign.iter().cloned().fold(f64::INFINITY, f64::min);
+    eprintln!("own cameras up to {max_own:.2} px, foreign from {min_foreign:.2} px ({MAX_RESIDUAL_PX} px)");
+}

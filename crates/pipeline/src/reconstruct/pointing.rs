@@ -58,6 +58,10 @@ const MIN_BAND_MARGIN: f32 = 0.05;
 /// Share of the adjusted tie points' altitudes cut off at each end, and the margin added to the
 /// rest: metres plus a share of their span.
 const ALT_PERCENTILE: f64 = 0.005;
+/// Metres within which an altitude needs two other tie points' to count.
+const ALT_NEIGHBOUR_M: f64 = 2.0;
+/// The same for the points of a pair, seen twice each.
+const PAIR_ALT_PERCENTILE: f64 = 0.03;
 const ALT_MARGIN_M: f64 = 5.0;
 const ALT_MARGIN_SHARE: f64 = 0.1;
 
@@ -377,15 +381,17 @@ pub fn adjust_views(
     };
     let adjustment = adjust_translations(&cameras, &tracks, alt, params)
         .context("adjusting the cameras on the tie points")?;
-    // Points seen three times and more when the set has them, else (a pair) every point.
+    // Points seen three times and more when the set has them, else (a pair) every point, cut
+    // harder at both ends: a point seen twice may sit anywhere along its parallax (a wrong match
+    // there leaves no residual).
     let checked = adjustment.altitudes(3);
-    let altitudes = if checked.len() >= 100 {
-        checked
+    let (altitudes, tail) = if checked.len() >= 100 {
+        (checked, ALT_PERCENTILE)
     } else {
-        adjustment.altitudes(2)
+        (adjustment.altitudes(2), PAIR_ALT_PERCENTILE)
     };
-    let alt_range =
-        altitude_range(&altitudes).context("too few tie points to tell the scene's altitudes")?;
+    let alt_range = altitude_range(&altitudes, tail)
+        .context("too few tie points to tell the scene's altitudes")?;
     Ok(Pointing {
         images: adjustment.images,
         pairs: tied,
@@ -397,20 +403,31 @@ pub fn adjust_views(
     })
 }
 
-/// Robust percentiles of the tie points' altitudes, widened by a margin; `None` with fewer than
-/// ten points.
-pub fn altitude_range(altitudes: &[f64]) -> Option<(f64, f64)> {
+/// The tie points' altitudes between their `tail` and `1 − tail` quantiles, widened by a margin;
+/// `None` with fewer than ten points. An altitude that no two others come within
+/// [`ALT_NEIGHBOUR_M`] of is a lone mismatch along the parallax and is dropped first: the ground
+/// and the roofs each gather many points.
+pub fn altitude_range(altitudes: &[f64], tail: f64) -> Option<(f64, f64)> {
     let mut a: Vec<f64> = altitudes
         .iter()
         .copied()
         .filter(|v| v.is_finite())
         .collect();
+    a.sort_by(f64::total_cmp);
+    let near = |i: usize| {
+        let lo = a.partition_point(|&v| v < a[i] - ALT_NEIGHBOUR_M);
+        let hi = a.partition_point(|&v| v <= a[i] + ALT_NEIGHBOUR_M);
+        hi - lo - 1
+    };
+    let a: Vec<f64> = (0..a.len())
+        .filter(|&i| near(i) >= 2)
+        .map(|i| a[i])
+        .collect();
     if a.len() < 10 {
         return None;
     }
-    a.sort_by(f64::total_cmp);
     let at = |q: f64| a[((a.len() - 1) as f64 * q).round() as usize];
-    let (lo, hi) = (at(ALT_PERCENTILE), at(1.0 - ALT_PERCENTILE));
+    let (lo, hi) = (at(tail), at(1.0 - tail));
     let margin = ALT_MARGIN_M + ALT_MARGIN_SHARE * (hi - lo);
     Some((lo - margin, hi + margin))
 }
@@ -553,10 +570,11 @@ mod tests {
     #[test]
     fn altitudes_drop_the_extremes_and_keep_a_margin() {
         let mut a: Vec<f64> = (0..1000).map(|i| i as f64 / 10.0).collect();
-        a.push(5000.0);
-        let (lo, hi) = altitude_range(&a).unwrap();
+        // Lone mismatches beyond the ends are dropped whatever the quantile.
+        a.extend([5000.0, -300.0, 400.0]);
+        let (lo, hi) = altitude_range(&a, 0.0).unwrap();
         assert!(lo < 0.0 - 5.0 && lo > -20.0, "{lo}");
         assert!(hi > 100.0 + 5.0 && hi < 120.0, "{hi}");
-        assert!(altitude_range(&a[..5]).is_none());
+        assert!(altitude_range(&a[..5], 0.005).is_none());
     }
 }
