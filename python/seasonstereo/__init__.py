@@ -258,9 +258,15 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     reconstruct`` with the same options and defaults (underscores for dashes): ``like``,
     ``truth``, ``resolution``, ``epsg``, ``gridding``, ``fill_holes``, ``fill_reach``,
     ``median_filter``, ``roi``, ``roi_lonlat``, ``alt_range``, ``tile``, ``collar``, ``max_memory`` (GiB),
-    ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates``, ``single_view``, ``threads`` (this call's
-    worker threads; default every core) and the matcher's options of :func:`predict`. Returns the tiles (``failed`` ones included: the DSM holds the others),
-    the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds`` and the
+    ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates``, ``single_view``,
+    ``no_pointing_correction``, ``threads`` (this call's
+    worker threads; default every core) and the matcher's options of :func:`predict`. Without
+    ``rpc_left``/``rpc_right`` each image's camera is found beside it as the command finds it (a
+    vendor ``.RPB``, ``_RPC.TXT``, DIMAP ``RPC_*.XML``, else the TIFF's RPC tag), so a vendor
+    delivery needs no camera argument. Returns the tiles (``failed`` ones included: the DSM holds the others),
+    the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds``,
+    ``pointing`` (the right camera's correction and residual per image, the tie points'
+    altitudes; None with ``no_pointing_correction``) and the
     ``warnings`` the command prints (also issued as Python warnings).
 
     An existing ``out`` raises ``FileExistsError`` (the command line's message) unless
@@ -282,7 +288,9 @@ def reconstruct_many(images: "Union[PathLike, Iterable[PathLike]]", rpc_dir: Opt
     """Many dates, one DSM, as ``seasonstereo reconstruct-many``: scores every overlapping pair
     of ``images`` (two or more; a list of paths, or a glob pattern such as
     ``"images/*.tif"``, expanded and sorted; cameras ``<image stem>.json`` in ``rpc_dir``, else
-    the images' RPC tags), reconstructs the best ``pairs`` and fuses them into ``out`` (with
+    found beside each image: a vendor delivery needs no camera argument), corrects every camera's
+    pointing by one bundle adjustment (``no_pointing_correction=True`` skips it), reconstructs
+    the best ``pairs`` and fuses them into ``out`` (with
     ``<out>_count.tif``, ``<out>_spread.tif``, ``<out>_confidence.tif`` and
     ``<out>_report.json`` beside it). Options, with the command's defaults: ``pairs``,
     ``dry_run`` (choose the pairs, write nothing), ``cluster_tolerance``, ``min_support``,
@@ -294,7 +302,10 @@ def reconstruct_many(images: "Union[PathLike, Iterable[PathLike]]", rpc_dir: Opt
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
     call's worker threads; default every core) and the matcher's options of :func:`predict`.
 
-    Returns the report's content: ``views``, ``candidates``, ``chosen`` (pairs with their score
+    Returns the report's content: ``views``, ``pointing`` (each image's correction and
+    residuals, the pairs tied, the tie points' altitudes), ``cameras`` (the corrected cameras as
+    rpcm dictionaries by image stem, also written as ``cameras/<stem>.json`` in the work folder),
+    ``candidates``, ``chosen`` (pairs with their score
     ``terms``), ``pairs`` (each pair's status, DSM, coverage, scores, agreement with the
     equal-weight fusion and weight in the fusion, seconds), ``fused`` (files,
     grid with ``transform`` and ``crs``, coverage; None on a dry run), ``scores``, ``seconds``

@@ -83,6 +83,7 @@ fn many_options(
         o.pair_median_filter = flags::median_cells(cells);
     }
     o.both_views = !k.take("single_view")?.unwrap_or(false);
+    o.adjust_pointing = !k.take("no_pointing_correction")?.unwrap_or(false);
     o.truth = k.path("truth")?;
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
@@ -101,5 +102,23 @@ fn many_summary(s: &ReconstructManySummary) -> PyResult<Value> {
         fused["crs"] = json!(crs(&f.grid));
     }
     value["warnings"] = json!(s.warnings());
+    value["cameras"] = adjusted_cameras(s);
     Ok(value)
+}
+
+/// The cameras the bundle adjustment wrote, as rpcm dictionaries by image stem (empty when it
+/// did not run).
+fn adjusted_cameras(s: &ReconstructManySummary) -> Value {
+    let mut cameras = serde_json::Map::new();
+    if s.pointing.is_some() {
+        for v in &s.views {
+            let Some(file) = &v.rpc_file else { continue };
+            let read = std::fs::read_to_string(file).ok();
+            let value = read.and_then(|t| serde_json::from_str::<Value>(&t).ok());
+            if let (Some(stem), Some(mut value)) = (v.image.file_stem(), value) {
+                cameras.insert(stem.to_string_lossy().into_owned(), value["rpc"].take());
+            }
+        }
+    }
+    Value::Object(cameras)
 }

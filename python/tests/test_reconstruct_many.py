@@ -2,6 +2,7 @@
 only chooses, and its refusals."""
 
 import filecmp
+import json
 
 import pytest
 
@@ -59,3 +60,24 @@ def test_shards_then_the_unsharded_call_give_one_call_s_dsm(dev, tmp_path):
     assert s["shard"] is None and s["fused"] is not None
     assert filecmp.cmp(tmp_path / "one" / "dsm.tif", tmp_path / "sharded" / "dsm.tif",
                        shallow=False)
+
+
+def test_a_vendor_delivery_needs_no_camera_and_gives_its_corrected_cameras(dev, tmp_path):
+    # Plain TIFFs with .RPB cameras and .IMD metadata beside them, nothing else.
+    images = [dev / "vendor" / f"JAX_068_{d}_RGB.TIF" for d in DATES]
+    truth = dev / "truth" / "JAX_068_DSM.tif"
+    s = seasonstereo.reconstruct_many(images, out=tmp_path / "dsm.tif", pairs=2, like=truth,
+                                      truth=truth)
+    assert [p["status"] for p in s["pairs"]] == ["done", "done"]
+    assert all(v["date"] for v in s["views"]), "dates from the .IMD files"
+    assert sorted(s["cameras"]) == [f"JAX_068_{d}_RGB" for d in DATES]
+    for stem, rpc in s["cameras"].items():
+        assert len(rpc["row_num"]) == 20 and rpc["alt_scale"] > 0
+        # The same camera as the file the run wrote, which `reconstruct` takes as it is.
+        written = json.loads((tmp_path / "dsm_work" / "cameras" / f"{stem}.json").read_text())
+        assert written["rpc"] == rpc and written["min_alt"] < written["max_alt"]
+    fits = s["pointing"]["images"]
+    assert all(f["rms_px"] < 1.2 for f in fits)
+    lo, hi = s["pointing"]["alt_range"]
+    assert -60 < lo < -20 and 25 < hi < 70
+    assert s["scores"]["mae_filtered"] < 1.2

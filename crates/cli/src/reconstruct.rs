@@ -95,7 +95,9 @@ pub struct ReconstructArgs {
     /// Use the cameras as given. By default the pair's relative pointing error (vendor RPCs are
     /// off by a few to tens of pixels, one translation over the image) is measured from tie
     /// points between the images and removed by translating the right camera; the log says by
-    /// how much. Without it and without JSON cameras, give --alt-range.
+    /// how much. JSON cameras that carry the scene's altitudes (min_alt/max_alt: a curated,
+    /// bundle-adjusted set, or those reconstruct-many writes) are always used as given. Without
+    /// the correction and without such cameras, give --alt-range.
     #[arg(long)]
     no_pointing_correction: bool,
     /// Folder of the intermediate files (default: OUTPUT without extension + "_work").

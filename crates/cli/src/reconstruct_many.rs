@@ -119,7 +119,8 @@ pub struct ReconstructManyArgs {
     /// adjustment of all the images on tie points tracked across them (near dates chaining the
     /// seasons); the corrected cameras are written as RPC JSON under the work folder
     /// (cameras/<image stem>.json, usable by `reconstruct --rpc-left/--rpc-right`) and the
-    /// corrections and residuals printed and kept in the report.
+    /// corrections and residuals printed and kept in the report. JSON cameras that all carry
+    /// the scene's altitudes (--rpc-dir of a curated, bundle-adjusted set) are used as given.
     #[arg(long)]
     no_pointing_correction: bool,
     /// Height of a cell of a pair's DSM from its points.

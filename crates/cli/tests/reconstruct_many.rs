@@ -447,3 +447,59 @@ fn bad_input_is_refused_before_any_work() {
     assert_eq!(bytes(&inputs), before, "an input changed");
     assert!(!out.exists() && !dir.path().join("dsm_work").exists());
 }
+
+/// A piped run (a batch log) says what it does as it does it: the pointing corrections and the
+/// chosen pairs before any pair is matched, and each pair when it finishes, the first well before
+/// the run is half done.
+#[test]
+fn a_piped_run_logs_its_pairs_as_they_finish() {
+    use std::io::{BufRead, BufReader};
+    use std::process::{Command, Stdio};
+    use std::time::Instant;
+    let d = testdata::require!("data/dfc2019-jax068-dev");
+    let dir = tempfile::tempdir().unwrap();
+    let mut images: Vec<String> = std::fs::read_dir(d.join("vendor"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "TIF"))
+        .map(|p| p.to_str().unwrap().to_string())
+        .collect();
+    images.sort();
+    assert_eq!(images.len(), 10);
+    let start = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
+        .arg("reconstruct-many")
+        .args(&images)
+        .args(["--pairs", "4", "-o"])
+        .arg(dir.path().join("dsm.tif"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lines: Vec<(f64, String)> = BufReader::new(child.stderr.take().unwrap())
+        .lines()
+        .map(|l| (start.elapsed().as_secs_f64(), l.unwrap()))
+        .collect();
+    assert!(child.wait().unwrap().success(), "{lines:?}");
+    let total = start.elapsed().as_secs_f64();
+    let first = |prefix: &str| {
+        lines
+            .iter()
+            .find(|(_, l)| l.starts_with(prefix))
+            .map(|(t, _)| *t)
+            .unwrap_or_else(|| panic!("no line {prefix:?} in {lines:?}"))
+    };
+    let (chosen, pair1, pair4) = (first("chosen 4 of"), first("pair 1/4"), first("pair 4/4"));
+    assert_eq!(
+        lines
+            .iter()
+            .filter(|(_, l)| l.starts_with("pointing: JAX_068"))
+            .count(),
+        10
+    );
+    assert!(first("pointing: JAX_068") <= chosen && chosen < pair1 && pair1 < pair4);
+    assert!(
+        pair1 < 0.5 * total,
+        "first pair at {pair1:.1} s of {total:.1} s"
+    );
+}

@@ -67,21 +67,27 @@ pub fn normalise_locally(image: &Image, r: usize) -> Image {
     })
 }
 
+/// Share of the best score within which a smaller shift is preferred ([`global_shift`]).
+const NEAR_BEST: f32 = 0.85;
+
 /// The integer shift `(dx, dy)`, `|dx|, |dy| ≤ radius`, such that `b(x + dx, y + dy)` best
 /// matches `a(x, y)` (mean product of the locally normalised images over their common valid
 /// pixels, at least a quarter of `a`'s), with its score; `None` when no shift overlaps enough.
+/// A regular street grid scores a peak at every period: of the peaks that score within
+/// [`NEAR_BEST`] of the best, the smallest shift is taken (pointing errors are mostly small).
 pub fn global_shift(a: &Image, b: &Image, radius: usize) -> Option<(i32, i32, f32)> {
     let (na, nb) = (normalise_locally(a, 4), normalise_locally(b, 4));
     let valid = na.data().iter().filter(|v| v.is_finite()).count();
     let r = radius as i32;
+    let side = 2 * r + 1;
     let shifts: Vec<(i32, i32)> = (-r..=r)
         .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
         .collect();
     let (w, h) = (na.width() as i32, na.height() as i32);
     let (bw, bh) = (nb.width() as i32, nb.height() as i32);
-    shifts
+    let scores: Vec<Option<f32>> = shifts
         .par_iter()
-        .filter_map(|&(dx, dy)| {
+        .map(|&(dx, dy)| {
             let (mut sum, mut n) = (0.0f64, 0usize);
             for y in 0..h {
                 let by = y + dy;
@@ -99,9 +105,31 @@ pub fn global_shift(a: &Image, b: &Image, radius: usize) -> Option<(i32, i32, f3
                     }
                 }
             }
-            (n > 0 && 4 * n >= valid).then(|| (dx, dy, (sum / n as f64) as f32))
+            (n > 0 && 4 * n >= valid).then(|| (sum / n as f64) as f32)
         })
-        .max_by(|p, q| p.2.total_cmp(&q.2).then(q.0.abs().cmp(&p.0.abs())))
+        .collect();
+    let best = scores
+        .iter()
+        .flatten()
+        .copied()
+        .fold(f32::NEG_INFINITY, f32::max);
+    if !(best > 0.0) {
+        return None;
+    }
+    let at = |dx: i32, dy: i32| -> Option<f32> {
+        (dx.abs() <= r && dy.abs() <= r)
+            .then(|| scores[((dy + r) * side + dx + r) as usize])
+            .flatten()
+    };
+    let peak = |dx: i32, dy: i32, s: f32| {
+        (-1..=1).all(|v| (-1..=1).all(|u| at(dx + u, dy + v).is_none_or(|o| o <= s)))
+    };
+    shifts
+        .iter()
+        .zip(&scores)
+        .filter_map(|(&(dx, dy), s)| s.map(|s| (dx, dy, s)))
+        .filter(|&(dx, dy, s)| s >= NEAR_BEST * best && peak(dx, dy, s))
+        .min_by_key(|&(dx, dy, _)| dx * dx + dy * dy)
 }
 
 /// The most textured pixel of each `spacing`-pixel cell (largest smaller eigenvalue of the
@@ -354,6 +382,21 @@ mod tests {
             "{m:?}"
         );
         assert!(m.score > 0.95 && m.runner_up < m.score);
+    }
+
+    #[test]
+    fn a_street_grid_gives_the_smallest_of_its_equal_shifts() {
+        // Periodic in x (period 16), textured in y: shifts 3, 3 ± 16 score alike.
+        let f = |x: f64, y: f64| {
+            ((x * std::f64::consts::TAU / 16.0).sin() * (1.0 + (y * 0.37).sin() + (y * 0.11).cos()))
+                as f32
+        };
+        let a = Image::from_fn(200, 120, |x, y| f(x as f64, y as f64));
+        let b = Image::from_fn(200, 120, |x, y| f(x as f64 - 3.0, y as f64));
+        let (dx, dy, _) = global_shift(&a, &b, 24).unwrap();
+        assert_eq!((dx, dy), (3, 0));
+        let b = Image::from_fn(200, 120, |x, y| f(x as f64 + 5.0, y as f64));
+        assert_eq!(global_shift(&a, &b, 24).map(|g| (g.0, g.1)), Some((-5, 0)));
     }
 
     #[test]

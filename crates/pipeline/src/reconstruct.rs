@@ -399,7 +399,8 @@ fn open_pair(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<OpenP
         "right",
     )?;
     let mut pointing = None;
-    let (alt_range, alt_source) = if opts.adjust_pointing {
+    let adjust = opts.adjust_pointing && pointing::needs_adjustment([&rpc_left, &rpc_right]);
+    let (alt_range, alt_source) = if adjust {
         let given = given_altitude_range(opts.alt_range, &rpc_left, &rpc_right)?;
         let alt = given.map_or(rpc_left.alt_offset, |((lo, hi), _)| 0.5 * (lo + hi));
         progress.note("pointing: tying the pair (tie points, then the right camera adjusted)");

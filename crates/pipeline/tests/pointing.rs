@@ -191,6 +191,8 @@ fn the_adjusted_vendor_cameras_agree_with_the_curated_ones_and_recover_40_px_err
 /// A pair from the vendor cameras, each shifted as given, scored: (MAE, coverage, within 1 m).
 fn vendor_pair(l: &str, r: &str, shift: [[f64; 2]; 2], out: &Path) -> (f64, f64, f64) {
     let truth = jax("truth/JAX_068_DSM.tif");
+    let out = &out.join(format!("{l}-{r}-{}", shift[0][0] != 0.0));
+    std::fs::create_dir_all(out).unwrap();
     let write = |id: &str, s: [f64; 2]| {
         let path = out.join(format!("{id}.json"));
         let rpc = vendor(id).translated(s[0], s[1]).to_rpcm_json();

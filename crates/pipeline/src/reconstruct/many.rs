@@ -112,9 +112,10 @@ pub struct ReconstructManyOptions {
     /// another run. A rerun of the same run ([`crate::provenance`]) replaces them without it.
     pub overwrite: bool,
     /// Adjust every camera's pointing at once from tie points ([`super::pointing`]) and take
-    /// the scene's altitudes from them when neither `alt_range` nor the cameras give any; the
-    /// corrected cameras are written under the work folder (`cameras/<image stem>.json`) and
-    /// the pairs use them.
+    /// the scene's altitudes from them when `alt_range` gives none; the corrected cameras are
+    /// written under the work folder (`cameras/<image stem>.json`) and the pairs use them.
+    /// Cameras that all carry the scene's altitudes (curated JSONs) are used as given
+    /// ([`super::pointing::needs_adjustment`]).
     pub adjust_pointing: bool,
 }
 
@@ -369,7 +370,8 @@ fn plan(
     let mut views = open_views(opts, zone, progress)?;
     check_distinct(&views)?;
     check_overlaps(&views)?;
-    let pointing = if opts.adjust_pointing && !opts.dry_run {
+    let adjust = super::pointing::needs_adjustment(views.iter().map(|v| &v.rpc));
+    let pointing = if opts.adjust_pointing && adjust && !opts.dry_run {
         // The adjusted cameras are the work folder's first content: it is this run's from now.
         crate::provenance::claim(
             &opts.work_dir(),

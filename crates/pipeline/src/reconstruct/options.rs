@@ -82,9 +82,10 @@ pub struct ReconstructOptions {
     /// whose fusion it does not help (BENCHMARKS.md).
     pub level_ground: bool,
     /// Correct the relative pointing error of the pair from tie points (the right camera
-    /// translated; [`super::pointing`]) and take the scene's altitudes from them when neither
-    /// `alt_range` nor the cameras give any. `reconstruct-many` turns it off for its pairs,
-    /// whose cameras it has adjusted all together.
+    /// translated; [`super::pointing`]) and take the scene's altitudes from them when
+    /// `alt_range` gives none; cameras that both carry the scene's altitudes (curated JSONs) are
+    /// used as given. `reconstruct-many` turns it off for its pairs, whose cameras it has
+    /// adjusted all together.
     pub adjust_pointing: bool,
 }
 

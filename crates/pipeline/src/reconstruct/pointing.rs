@@ -65,6 +65,15 @@ const PAIR_ALT_PERCENTILE: f64 = 0.03;
 const ALT_MARGIN_M: f64 = 5.0;
 const ALT_MARGIN_SHARE: f64 = 0.1;
 
+/// Whether cameras are to be corrected: those that carry the scene's altitudes (`min_alt`/
+/// `max_alt` of a SatNeRF/rpcm JSON: a curated, bundle-adjusted set such as SatNeRF's, or the
+/// cameras `reconstruct-many` writes) are used as given; vendor cameras are corrected.
+pub fn needs_adjustment<'a>(cameras: impl IntoIterator<Item = &'a RpcModel>) -> bool {
+    cameras
+        .into_iter()
+        .any(|c| c.min_alt.is_none() || c.max_alt.is_none())
+}
+
 /// A camera leaves its image's tie points at most this far after the correction, pixels, RMS:
 /// on the 45 dev pairs (vendor cameras) 0.24–1.08 px with each image's camera, 1.38–6.64 px with
 /// the right camera of another image of the area.
