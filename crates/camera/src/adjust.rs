@@ -141,14 +141,14 @@ impl Frame {
             north: METRES_PER_DEGREE,
         }
     }
-    fn to_metres(&self, lon: f64, lat: f64, alt: f64) -> [f64; 3] {
+    fn metres_of(self, lon: f64, lat: f64, alt: f64) -> [f64; 3] {
         [
             (lon - self.lon0) * self.east,
             (lat - self.lat0) * self.north,
             alt,
         ]
     }
-    fn to_ground(&self, m: [f64; 3]) -> [f64; 3] {
+    fn ground_of(self, m: [f64; 3]) -> [f64; 3] {
         [
             self.lon0 + m[0] / self.east,
             self.lat0 + m[1] / self.north,
@@ -161,7 +161,7 @@ impl Frame {
 /// (forward differences of 0.5 m: the RPC is smooth at that scale).
 fn project(frame: &Frame, rpc: &RpcModel, t: [f64; 2], x: [f64; 3]) -> ([f64; 2], [[f64; 3]; 2]) {
     let at = |m: [f64; 3]| {
-        let g = frame.to_ground(m);
+        let g = frame.ground_of(m);
         let (c, r) = rpc.projection(g[0], g[1], g[2]);
         [c + t[0], r + t[1]]
     };
@@ -229,7 +229,7 @@ fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     };
     let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
     let scale = m[0][0].abs() + m[1][1].abs() + m[2][2].abs();
-    if !(det.abs() > 1e-12 * scale * scale * scale) {
+    if det.is_nan() || det.abs() <= 1e-12 * scale * scale * scale {
         return None;
     }
     let mut inv = [[0.0; 3]; 3];
@@ -244,6 +244,9 @@ fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
 fn mat3_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
 }
+
+/// One observation's part of the normal equations: image, weight, Jacobian, residual.
+type Term = (usize, f64, [[f64; 3]; 2], [f64; 2]);
 
 /// The state of the adjustment.
 struct Problem<'a> {
@@ -296,8 +299,8 @@ impl Problem<'_> {
                 return;
             };
             let d = mat3_vec(&inv, g);
-            for a in 0..3 {
-                self.points[j][a] += d[a];
+            for (p, step) in self.points[j].iter_mut().zip(d) {
+                *p += step;
             }
             if d.iter().map(|v| v * v).sum::<f64>() < 1e-8 {
                 break;
@@ -319,7 +322,7 @@ impl Problem<'_> {
             // Blocks of this track: V (3×3), W_i (3×2, identity Jacobian of t), g_X.
             let mut v = [[0.0; 3]; 3];
             let mut gx = [0.0; 3];
-            let mut terms: Vec<(usize, f64, [[f64; 3]; 2], [f64; 2])> = Vec::new();
+            let mut terms: Vec<Term> = Vec::new();
             for o in self.observations(j) {
                 let (p, jac) = project(
                     &self.frame,
@@ -543,7 +546,7 @@ pub fn adjust_translations(
         });
         alive.push(seed.is_some() && t.observations.len() >= 2);
         let (lon, lat) = seed.unwrap_or((frame.lon0, frame.lat0));
-        points.push(frame.to_metres(lon, lat, initial_alt));
+        points.push(frame.metres_of(lon, lat, initial_alt));
     }
     let mut problem = Problem {
         cameras,
@@ -617,7 +620,7 @@ fn summarise(problem: &Problem, n: usize) -> Adjustment {
         f.rms_before_px = (sq0[i] / count).sqrt();
     }
     let points = (0..problem.tracks.len())
-        .map(|j| problem.alive[j].then(|| problem.frame.to_ground(problem.points[j])))
+        .map(|j| problem.alive[j].then(|| problem.frame.ground_of(problem.points[j])))
         .collect();
     let views = (0..problem.tracks.len())
         .map(|j| problem.kept[j].iter().filter(|k| **k).count())

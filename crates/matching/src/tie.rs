@@ -60,7 +60,7 @@ pub fn normalise_locally(image: &Image, r: usize) -> Image {
         let n = ((2 * r + 1) * (2 * r + 1)) as f64;
         let mean = s / n;
         let var = s2 / n - mean * mean;
-        if !(var > 1e-6) {
+        if var.is_nan() || var <= 1e-6 {
             return f32::NAN;
         }
         ((image.get(x, y, 0) as f64 - mean) / var.sqrt()) as f32
@@ -113,7 +113,7 @@ pub fn global_shift(a: &Image, b: &Image, radius: usize) -> Option<(i32, i32, f3
         .flatten()
         .copied()
         .fold(f32::NEG_INFINITY, f32::max);
-    if !(best > 0.0) {
+    if best.is_nan() || best <= 0.0 {
         return None;
     }
     let at = |dx: i32, dy: i32| -> Option<f32> {
@@ -255,7 +255,7 @@ impl TieSearch<'_> {
         across_radius: f64,
     ) -> Option<TieMatch> {
         let norm = along.0.hypot(along.1);
-        if !(norm > 0.0) {
+        if norm.is_nan() || norm <= 0.0 {
             return None;
         }
         let e = (along.0 / norm, along.1 / norm);

@@ -225,7 +225,7 @@ fn parallax_per_metre(a: &TieView, b: &TieView, alt: f64) -> Option<(f64, f64)> 
     let (j00, j10, j01, j11) = (mx.0 - m.0, mx.1 - m.1, my.0 - m.0, my.1 - m.1);
     let (u, v) = (m1.0 - m.0, m1.1 - m.1);
     let det = j00 * j11 - j01 * j10;
-    if !(det.abs() > 1e-12) {
+    if det.is_nan() || det.abs() <= 1e-12 {
         return None;
     }
     Some((
