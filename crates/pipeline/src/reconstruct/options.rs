@@ -158,6 +158,8 @@ impl ReconstructOptions {
     /// run's folder is refused, or cleared with `overwrite`). The rule of every caller (command
     /// line, Python).
     pub fn check_output(&self, overwrite: bool) -> anyhow::Result<()> {
+        // A wrong command line is said before what it would write.
+        self.check_truth()?;
         let like = match &self.grid {
             GridChoice::Like(p) => Some(p),
             _ => None,
