@@ -273,27 +273,36 @@ impl Problem<'_> {
             .map(|(o, _)| o)
     }
 
+    /// Track `j`'s part of the normal equations: the point's block `JᵀWJ` and gradient `JᵀWr`
+    /// (Huber weights), and each observation's image, weight, Jacobian and residual.
+    fn point_system(&self, j: usize) -> ([[f64; 3]; 3], [f64; 3], Vec<Term>) {
+        let mut h = [[0.0; 3]; 3];
+        let mut g = [0.0; 3];
+        let mut terms = Vec::new();
+        for o in self.observations(j) {
+            let (p, jac) = project(
+                &self.frame,
+                &self.cameras[o.image],
+                self.shifts[o.image],
+                self.points[j],
+            );
+            let r = [o.col - p[0], o.row - p[1]];
+            let w = huber_weight(r[0].hypot(r[1]), self.params.huber_px);
+            for a in 0..3 {
+                g[a] += w * (jac[0][a] * r[0] + jac[1][a] * r[1]);
+                for b in 0..3 {
+                    h[a][b] += w * (jac[0][a] * jac[0][b] + jac[1][a] * jac[1][b]);
+                }
+            }
+            terms.push((o.image, w, jac, r));
+        }
+        (h, g, terms)
+    }
+
     /// Gauss–Newton on one track's point with the translations fixed.
     fn refine_point(&mut self, j: usize, iterations: usize) {
         for _ in 0..iterations {
-            let mut h = [[0.0; 3]; 3];
-            let mut g = [0.0; 3];
-            for o in self.observations(j) {
-                let (p, jac) = project(
-                    &self.frame,
-                    &self.cameras[o.image],
-                    self.shifts[o.image],
-                    self.points[j],
-                );
-                let r = [o.col - p[0], o.row - p[1]];
-                let w = huber_weight(r[0].hypot(r[1]), self.params.huber_px);
-                for a in 0..3 {
-                    g[a] += w * (jac[0][a] * r[0] + jac[1][a] * r[1]);
-                    for b in 0..3 {
-                        h[a][b] += w * (jac[0][a] * jac[0][b] + jac[1][a] * jac[1][b]);
-                    }
-                }
-            }
+            let (h, g, _) = self.point_system(j);
             let Some(inv) = invert3(h) else {
                 self.alive[j] = false;
                 return;
@@ -320,30 +329,12 @@ impl Problem<'_> {
                 continue;
             }
             // Blocks of this track: V (3×3), W_i (3×2, identity Jacobian of t), g_X.
-            let mut v = [[0.0; 3]; 3];
-            let mut gx = [0.0; 3];
-            let mut terms: Vec<Term> = Vec::new();
-            for o in self.observations(j) {
-                let (p, jac) = project(
-                    &self.frame,
-                    &self.cameras[o.image],
-                    self.shifts[o.image],
-                    self.points[j],
-                );
-                let r = [o.col - p[0], o.row - p[1]];
-                let w = huber_weight(r[0].hypot(r[1]), self.params.huber_px);
-                for a in 0..3 {
-                    gx[a] += w * (jac[0][a] * r[0] + jac[1][a] * r[1]);
-                    for c in 0..3 {
-                        v[a][c] += w * (jac[0][a] * jac[0][c] + jac[1][a] * jac[1][c]);
-                    }
-                }
-                let i = o.image;
+            let (v, gx, terms) = self.point_system(j);
+            for &(i, w, _, r) in &terms {
                 s[(2 * i) * m + 2 * i] += w;
                 s[(2 * i + 1) * m + 2 * i + 1] += w;
                 b[2 * i] += w * r[0];
                 b[2 * i + 1] += w * r[1];
-                terms.push((i, w, jac, r));
             }
             let Some(vinv) = invert3(v) else {
                 self.alive[j] = false;
