@@ -7,26 +7,27 @@ use raster::formats::{read_tiff, GeoRaster, GeoReference, GeoTiffMeta};
 use raster::Image;
 use rayon::prelude::*;
 
-use crate::{CameraError, Points, Result, UtmZone};
+use crate::{CameraError, Crs, Points, Result, UtmZone};
 
-/// A north-up UTM grid of square cells: cell (col, row) covers eastings
-/// [x0 + col·res, x0 + (col+1)·res) and northings (y0 − (row+1)·res, y0 − row·res].
+/// A north-up grid of square cells in a map projection (UTM by default, any EPSG code): cell
+/// (col, row) covers x (eastings) [x0 + col·res, x0 + (col+1)·res) and y (northings)
+/// (y0 − (row+1)·res, y0 − row·res].
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct DsmGrid {
-    /// Easting of the west edge, metres.
+    /// Easting (x) of the west edge, in the CRS's units (metres, or degrees of longitude).
     pub x0: f64,
-    /// Northing of the north edge, metres.
+    /// Northing (y) of the north edge, in the CRS's units.
     pub y0: f64,
-    /// Cell size, metres.
+    /// Cell size, in the CRS's units.
     pub resolution: f64,
     pub width: usize,
     pub height: usize,
-    /// WGS84/UTM EPSG code (326zz or 327zz).
+    /// EPSG code of the CRS (WGS84/UTM 326zz or 327zz by default).
     pub epsg: u32,
 }
 
 impl DsmGrid {
-    /// A grid, checked: positive finite resolution, non-empty, a UTM EPSG code.
+    /// A grid, checked: positive finite resolution, non-empty, a known EPSG code.
     pub fn new(
         x0: f64,
         y0: f64,
@@ -48,7 +49,7 @@ impl DsmGrid {
                 "DSM size {width}x{height} is empty or too large"
             )));
         }
-        UtmZone::from_epsg(epsg)?;
+        Crs::from_epsg(epsg)?;
         Ok(DsmGrid {
             x0,
             y0,
@@ -59,7 +60,7 @@ impl DsmGrid {
         })
     }
 
-    /// The grid covering [x_min, x_max] × [y_min, y_max] (UTM metres) at `resolution`.
+    /// The grid covering [x_min, x_max] × [y_min, y_max] (the CRS's units) at `resolution`.
     pub fn from_bounds(
         x_min: f64,
         y_min: f64,
@@ -85,7 +86,7 @@ impl DsmGrid {
     }
 
     /// The grid of a georeferenced raster of `width` × `height` pixels: north-up, square cells,
-    /// UTM.
+    /// an EPSG code.
     pub fn from_georeference(georef: &GeoReference, width: usize, height: usize) -> Result<Self> {
         let gt = georef.geotransform;
         if gt[2] != 0.0 || gt[4] != 0.0 {
@@ -168,9 +169,33 @@ impl DsmGrid {
             .map_err(|err| CameraError::Georeference(format!("{origin}: {err}")))
     }
 
-    /// The grid's UTM zone.
-    pub fn zone(&self) -> UtmZone {
-        UtmZone::from_epsg(self.epsg).expect("checked at construction")
+    /// The grid's UTM zone, when its CRS is one (what a DFC2019 `.txt` georeference lacks).
+    pub fn zone(&self) -> Option<UtmZone> {
+        self.crs().utm_zone()
+    }
+
+    /// The UTM zone of the grid, or of its centre when its CRS is not UTM: the zone a DFC2019
+    /// `.txt` georeference of the same area is in.
+    pub fn nearest_zone(&self) -> UtmZone {
+        self.zone().unwrap_or_else(|| {
+            let (x, y) = self.cell_centre(self.width / 2, self.height / 2);
+            let (lon, lat) = self.crs().inverse(x, y);
+            UtmZone::from_lonlat(lon, lat)
+        })
+    }
+
+    /// The grid's map projection.
+    pub fn crs(&self) -> &'static Crs {
+        Crs::from_epsg(self.epsg).expect("checked at construction")
+    }
+
+    /// The (x, y) of the centre of cell (col, row).
+    #[inline]
+    pub fn cell_centre(&self, col: usize, row: usize) -> (f64, f64) {
+        (
+            self.x0 + (col as f64 + 0.5) * self.resolution,
+            self.y0 - (row as f64 + 0.5) * self.resolution,
+        )
     }
 
     /// The GDAL-style georeference to write the grid with.
@@ -178,7 +203,7 @@ impl DsmGrid {
         GeoReference::from_origin_utm(self.x0, self.y0, self.resolution, self.epsg)
     }
 
-    /// The (col, row) of the cell containing UTM (easting, northing): floor, as the benchmark.
+    /// The (col, row) of the cell containing (easting, northing): floor, as the benchmark.
     #[inline]
     pub fn cell_of(&self, easting: f64, northing: f64) -> Option<(usize, usize)> {
         let c = ((easting - self.x0) / self.resolution).floor();
@@ -188,15 +213,29 @@ impl DsmGrid {
     }
 }
 
+/// `555x586 cells of 0.5 m, EPSG:32617`: the grid as the log says it.
+impl std::fmt::Display for DsmGrid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}x{} cells of {}, EPSG:{}",
+            self.width,
+            self.height,
+            self.crs().length(self.resolution),
+            self.epsg
+        )
+    }
+}
+
 /// The heights of `image` (lying on `from`) at the centres of the cells of `onto`: the nearest
 /// cell, NaN outside `from`. For one cell size and zone this is the benchmark's crop of any DSM
 /// onto the truth's window (GDAL's `projWin` snaps the window to whole cells, which is the
-/// nearest cell here); across cell sizes or UTM zones it is a nearest-cell resampling (through
-/// longitude and latitude when the zones differ).
+/// nearest cell here); across cell sizes or CRSs it is a nearest-cell resampling (through
+/// longitude and latitude when the CRSs differ).
 pub fn resample_nearest(image: &Image, from: &DsmGrid, onto: &DsmGrid) -> Image {
     let src = image.channel(0);
     let data = src.data();
-    let (zone_from, zone_onto) = (from.zone(), onto.zone());
+    let (crs_from, crs_onto) = (from.crs(), onto.crs());
     let same_zone = from.epsg == onto.epsg;
     let out: Vec<f32> = (0..onto.height)
         .into_par_iter()
@@ -207,8 +246,8 @@ pub fn resample_nearest(image: &Image, from: &DsmGrid, onto: &DsmGrid) -> Image 
                 let (e, n) = if same_zone {
                     (easting, northing)
                 } else {
-                    let (lon, lat) = zone_onto.inverse(easting, northing);
-                    zone_from.forward(lon, lat)
+                    let (lon, lat) = crs_onto.inverse(easting, northing);
+                    crs_from.forward(lon, lat)
                 };
                 from.cell_of(e, n)
                     .map_or(f32::NAN, |(col, row)| data[row * from.width + col])
@@ -305,7 +344,7 @@ fn cells_with<T: Send>(
     grid: &DsmGrid,
     value: impl Fn(usize, f64) -> T + Sync,
 ) -> Vec<(usize, T)> {
-    let zone = grid.zone();
+    let crs = grid.crs();
     points
         .lonlatalt
         .par_iter()
@@ -315,7 +354,7 @@ fn cells_with<T: Send>(
             if !(lon.is_finite() && lat.is_finite() && alt.is_finite()) {
                 return None;
             }
-            let (e, n) = zone.forward(lon, lat);
+            let (e, n) = crs.forward(lon, lat);
             grid.cell_of(e, n)
                 .map(|(c, r)| (r * grid.width + c, value(i, alt)))
         })
@@ -605,11 +644,24 @@ pub fn dsm_writer(path: impl AsRef<Path>, grid: &DsmGrid) -> Result<raster::form
     )?)
 }
 
-/// The tags of a DSM on `grid`: its georeference and NaN as nodata.
+/// The tags of a DSM on `grid`: its georeference, NaN as nodata, and what its heights are.
 fn dsm_meta(grid: &DsmGrid) -> GeoTiffMeta {
     GeoTiffMeta {
         georef: Some(grid.georeference()),
         nodata: Some(f64::NAN),
         rpc: None,
+        gdal_metadata: Some(HEIGHTS_METADATA.to_string()),
     }
 }
+
+/// What a DSM's heights are, in GDAL's metadata: `gdalinfo` and QGIS show the band's
+/// description and unit, and the vertical reference as a dataset item. The heights are
+/// ellipsoidal (WGS84, EPSG:4979's vertical axis), as the RPC cameras give them: not above the
+/// geoid or mean sea level (EGM96/EGM2008), which differ by tens of metres.
+pub const HEIGHTS_METADATA: &str = "<GDALMetadata>\n  \
+     <Item name=\"VERTICAL_REFERENCE\">ellipsoidal heights, WGS84 (EPSG:4979)</Item>\n  \
+     <Item name=\"VERTICAL_UNIT\">metre</Item>\n  \
+     <Item name=\"DESCRIPTION\" sample=\"0\" role=\"description\">height above the WGS84 \
+     ellipsoid</Item>\n  \
+     <Item name=\"UNITTYPE\" sample=\"0\" role=\"unittype\">metre</Item>\n\
+     </GDALMetadata>";

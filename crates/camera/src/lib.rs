@@ -9,6 +9,7 @@
 mod error;
 
 pub mod adjust;
+pub mod crs;
 pub mod dsm;
 pub mod rectify;
 pub mod rpc;
@@ -19,6 +20,7 @@ pub mod vendor;
 pub use adjust::{
     adjust_translations, AdjustParams, Adjustment, Gauge, ImageFit, Observation, Track,
 };
+pub use crs::Crs;
 pub use dsm::{
     dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window,
     rasterize_window_with, read_dsm, resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow,

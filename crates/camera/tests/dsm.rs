@@ -13,7 +13,7 @@ fn grid_of_the_s2p_dsm() {
     let grid = DsmGrid::read_geotiff(s2p("tests/data/expected_output/pair/dsm.tif")).unwrap();
     assert_eq!((grid.width, grid.height, grid.epsg), (721, 739, 32740));
     assert_eq!(grid.resolution, 0.5);
-    assert_eq!(grid.zone(), UtmZone::from_epsg(32740).unwrap());
+    assert_eq!(grid.zone(), Some(UtmZone::from_epsg(32740).unwrap()));
 }
 
 #[test]
@@ -53,7 +53,10 @@ fn from_bounds_covers_the_extent() {
     assert_eq!((g.x0, g.y0, g.width, g.height), (100.0, 205.0, 21, 10));
     assert!(DsmGrid::from_bounds(100.0, 200.0, 90.0, 205.0, 0.5, 32740).is_err());
     assert!(DsmGrid::new(0.0, 0.0, 0.0, 1, 1, 32740).is_err());
-    assert!(DsmGrid::new(0.0, 0.0, 1.0, 1, 1, 4326).is_err());
+    // Any known EPSG code; unknown codes are refused.
+    assert!(DsmGrid::new(-81.7, 30.3, 1e-5, 1, 1, 4326).is_ok());
+    assert!(DsmGrid::new(0.0, 0.0, 1.0, 1, 1, 3857).is_ok());
+    assert!(DsmGrid::new(0.0, 0.0, 1.0, 1, 1, 1).is_err());
 }
 
 #[test]
@@ -71,6 +74,31 @@ fn write_dsm_round_trips_georeference() {
     assert_eq!(DsmGrid::of_raster(&back, "dsm.tif").unwrap(), grid);
     // A mismatched image is refused.
     assert!(write_dsm(&path, &Image::filled(4, 4, 1, 0.0), &grid).is_err());
+}
+
+#[test]
+fn a_dsm_says_what_its_heights_are_in_any_crs() {
+    let dir = tempfile::tempdir().unwrap();
+    for grid in [
+        DsmGrid::new(366000.0, 7652000.0, 0.5, 5, 4, 32740).unwrap(),
+        DsmGrid::new(-81.70, 30.32, 4.5e-6, 5, 4, 4326).unwrap(),
+        DsmGrid::new(-9_094_000.0, 3_543_000.0, 0.58, 5, 4, 3857).unwrap(),
+    ] {
+        let path = dir.path().join(format!("{}.tif", grid.epsg));
+        write_dsm(&path, &Image::filled(5, 4, 1, 3.0), &grid).unwrap();
+        let meta = raster::formats::TiffReader::open(&path)
+            .unwrap()
+            .gdal_metadata
+            .unwrap();
+        for item in [
+            r#"role="description">height above the WGS84 ellipsoid<"#,
+            r#"role="unittype">metre<"#,
+            "VERTICAL_REFERENCE\">ellipsoidal heights, WGS84 (EPSG:4979)<",
+        ] {
+            assert!(meta.contains(item), "{item} not in {meta}");
+        }
+        assert_eq!(DsmGrid::read_geotiff(&path).unwrap(), grid);
+    }
 }
 
 #[test]
@@ -95,8 +123,8 @@ fn unusable_georeferences_are_errors() {
     let mut no_epsg = GeoReference::from_origin_utm(0.0, 0.0, 0.5, 32740);
     no_epsg.epsg = None;
     assert!(DsmGrid::from_georeference(&no_epsg, 3, 3).is_err());
-    let geographic = GeoReference::from_origin_utm(0.0, 0.0, 0.5, 4326);
-    assert!(DsmGrid::from_georeference(&geographic, 3, 3).is_err());
+    let unknown = GeoReference::from_origin_utm(0.0, 0.0, 0.5, 1);
+    assert!(DsmGrid::from_georeference(&unknown, 3, 3).is_err());
 
     // A real TIFF without georeference: a satellite image.
     testdata::require!(S2P);
@@ -158,7 +186,7 @@ fn dfc2019_txt_errors_name_the_file() {
 #[test]
 fn median_gridding_ignores_an_isolated_high_point() {
     let grid = DsmGrid::new(436000.0, 3358000.0, 0.5, 4, 3, 32617).unwrap();
-    let zone = grid.zone();
+    let zone = grid.zone().unwrap();
     // Three points in cell (1, 1): 10, 11 and a wrong 40 m; one point in cell (3, 0).
     let at = |c: f64, r: f64, alt: f64| {
         let (lon, lat) = zone.inverse(436000.0 + (c + 0.5) * 0.5, 3358000.0 - (r + 0.5) * 0.5);

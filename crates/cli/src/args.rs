@@ -366,16 +366,20 @@ impl TilingArgs {
     }
 }
 
-/// The DSM's grid: a reference DSM's, or a UTM grid of a resolution over the scene.
+/// The DSM's grid: a reference DSM's, or a grid of a resolution over the scene in any CRS.
 #[derive(Args)]
 pub struct GridArgs {
     /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
     #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
     pub like: Option<PathBuf>,
-    /// Cell size in metres (without --like; the grid covers the scene).
+    /// Cell size in metres on the ground (without --like; the grid covers the scene). In a CRS
+    /// whose unit is not a ground metre (degrees, Web Mercator, feet) it is converted at the
+    /// scene's centre; the log says the size in the CRS's unit.
     #[arg(long, default_value_t = pipeline::flags::RESOLUTION, value_parser = parse_resolution)]
     pub resolution: f64,
-    /// EPSG code of the UTM zone (without --like; default: the scene's zone).
+    /// EPSG code of the DSM's CRS, projected or geographic: 32617 (UTM 17N), 4326
+    /// (longitude/latitude), 3857 (Web Mercator), a national grid (without --like; default: the
+    /// scene's UTM zone). Heights stay ellipsoidal (WGS84) in any CRS.
     #[arg(long)]
     pub epsg: Option<u32>,
 }

@@ -20,20 +20,22 @@ pub struct DsmArgs {
     /// Camera of the right raw image (JSON or GeoTIFF).
     #[arg(long)]
     rpc_right: PathBuf,
-    /// Output DSM (float32 GeoTIFF, UTM, NaN where no point fell).
+    /// Output DSM (float32 GeoTIFF: heights above the WGS84 ellipsoid, NaN where no point fell).
     #[arg(short, long)]
     output: PathBuf,
-    /// Use the grid (origin, resolution, size, UTM zone) of this georeferenced DSM, e.g. the
+    /// Use the grid (origin, resolution, size, CRS) of this georeferenced DSM, e.g. the
     /// ground truth. Otherwise the grid is built from --resolution and --bounds.
     #[arg(long, conflicts_with_all = ["resolution", "bounds", "epsg"])]
     like: Option<PathBuf>,
-    /// Cell size in metres.
+    /// Cell size in metres on the ground (converted at the points' centre in a CRS whose unit is
+    /// not a ground metre).
     #[arg(long, default_value_t = flags::RESOLUTION, value_parser = crate::args::parse_resolution)]
     resolution: f64,
-    /// UTM bounds XMIN,YMIN,XMAX,YMAX in metres (default: the extent of the points).
+    /// Bounds XMIN,YMIN,XMAX,YMAX in the CRS's units (default: the extent of the points).
     #[arg(long, value_name = "XMIN,YMIN,XMAX,YMAX", value_parser = parse_bounds, allow_hyphen_values = true)]
     bounds: Option<[f64; 4]>,
-    /// EPSG code of the UTM zone (326zz north, 327zz south; default: the zone of the points).
+    /// EPSG code of the DSM's CRS, projected or geographic (default: the UTM zone of the
+    /// points).
     #[arg(long)]
     epsg: Option<u32>,
     /// Height of a cell from its points. Default max: the benchmark's protocol, so DSMs compare
@@ -79,12 +81,9 @@ pub fn run(a: DsmArgs) -> Result<()> {
     options.check_output(crate::exit::overwrite())?;
     let s = disparity_to_dsm(&options)?;
     println!(
-        "wrote {} ({}x{} cells of {} m, EPSG:{}, {} points, {} cells filled)",
+        "wrote {} ({}, {} points, {} cells filled)",
         a.output.display(),
-        s.grid.width,
-        s.grid.height,
-        s.grid.resolution,
-        s.grid.epsg,
+        s.grid,
         s.points,
         s.filled_cells
     );

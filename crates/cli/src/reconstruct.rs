@@ -37,7 +37,8 @@ pub struct ReconstructArgs {
     left: PathBuf,
     /// Right raw image, idem with --rpc-right.
     right: PathBuf,
-    /// Output DSM: float32 GeoTIFF (UTM, NaN where no point fell). Beside it `<stem>_filled.tif`,
+    /// Output DSM: float32 GeoTIFF (heights above the WGS84 ellipsoid; the scene's UTM zone or
+    /// --epsg). Beside it `<stem>_filled.tif`,
     /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height; and,
     /// with the classical matcher, `<stem>_confidence.tif`: each measured cell's matching
     /// confidence, 1 − S1/S2 (the winner's aggregated cost against its best rival more than a
@@ -245,13 +246,9 @@ fn dsm_line(s: &ReconstructSummary, dsm: &DsmSummary, output: &std::path::Path) 
         .collect();
     let cells = (dsm.grid.width * dsm.grid.height) as f64;
     format!(
-        "wrote {} ({}x{} cells of {} m, EPSG:{}, {:.1} % measured, {:.1} % with a height) from \
-         pair {}; {}",
+        "wrote {} ({}, {:.1} % measured, {:.1} % with a height) from pair {}; {}",
         output.display(),
-        dsm.grid.width,
-        dsm.grid.height,
-        dsm.grid.resolution,
-        dsm.grid.epsg,
+        dsm.grid,
         100.0 * dsm.measured_cells as f64 / cells,
         100.0 * dsm.filled_cells as f64 / cells,
         s.stem,

@@ -48,7 +48,7 @@ pub struct ReconstructManyArgs {
     /// The raw images of the area (two or more; GeoTIFFs with RPC tags, or cameras in --rpc-dir).
     #[arg(required = true, value_name = "IMAGE")]
     images: Vec<PathBuf>,
-    /// Output fused DSM (float32 COG).
+    /// Output fused DSM (float32 COG, heights above the WGS84 ellipsoid).
     #[arg(short, long)]
     output: PathBuf,
     /// Folder of the cameras as SatNeRF/rpcm JSON, one `<image stem>.json` per image (dates and
@@ -295,13 +295,10 @@ fn pair_line(p: &seasonstereo::PairOutcome) -> String {
 fn fused_line(s: &ReconstructManySummary, f: &seasonstereo::FusedOutcome) -> String {
     let cells = (f.grid.width * f.grid.height) as f64;
     format!(
-        "wrote {} ({}x{} cells of {} m, EPSG:{}; {} pairs fused, {:.1} % measured, {:.1} % with \
-         a height; count {}, spread {}, confidence {}) in {:.1} s",
+        "wrote {} ({}; {} pairs fused, {:.1} % measured, {:.1} % with a height; count {}, \
+         spread {}, confidence {}) in {:.1} s",
         f.dsm.display(),
-        f.grid.width,
-        f.grid.height,
-        f.grid.resolution,
-        f.grid.epsg,
+        f.grid,
         f.pairs,
         100.0 * f.measured_cells as f64 / cells,
         100.0 * f.filled_cells as f64 / cells,

@@ -118,20 +118,16 @@ pub fn run(a: ScoreArgs) -> Result<()> {
 /// takes its scores for those of a DSM made on that grid. (A DSM that cannot be read is
 /// reported by the scoring itself.)
 fn note_cut(path: &Path, truth: &Truth) {
-    let Ok(grid) = camera::DsmGrid::read(path, Some(truth.grid.zone())) else {
+    let Ok(grid) = camera::DsmGrid::read(path, truth.grid.zone()) else {
         return;
     };
     if grid != truth.grid {
         eprintln!(
-            "{}: on its own grid ({}x{} cells of {} m from {:.2}, {:.2}, EPSG {}); cut onto the \
-             truth's grid (nearest cell, NaN outside)",
+            "{}: on its own grid ({grid} from {:.2}, {:.2}); cut onto the truth's grid \
+             (nearest cell, NaN outside)",
             path.display(),
-            grid.width,
-            grid.height,
-            grid.resolution,
             grid.x0,
             grid.y0,
-            grid.epsg
         );
     }
 }

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use camera::{
-    rasterize, triangulate_disparity, write_dsm, DsmGrid, DsmRaster, Gridding, HoleFill, Points,
-    RpcModel, UtmZone,
+    rasterize, triangulate_disparity, write_dsm, Crs, DsmGrid, DsmRaster, Gridding, HoleFill,
+    Points, RpcModel, UtmZone,
 };
 use raster::{Image, Mask};
 
@@ -19,13 +19,18 @@ use crate::eval::align::{align, apply, AlignParams};
 pub enum GridChoice {
     /// The grid of an existing georeferenced DSM (e.g. the ground truth).
     Like(PathBuf),
-    /// `resolution` metres; UTM bounds (x_min, y_min, x_max, y_max) or the points' extent; the UTM
-    /// zone by EPSG code or from the points' centre.
+    /// Cells of `resolution` metres on the ground (in the CRS's units where they are not ground
+    /// metres: see [`camera::Crs::cell_size`]); bounds (x_min, y_min, x_max, y_max) in the CRS's
+    /// units, or the points' extent; the CRS by EPSG code (any projected or geographic one), or
+    /// the UTM zone of the points' centre.
     Resolution {
         resolution: f64,
         bounds: Option<[f64; 4]>,
         epsg: Option<u32>,
     },
+    /// Exactly this grid: what `reconstruct-many` hands each pair so that all of them lie on the
+    /// fused grid.
+    Exact(DsmGrid),
 }
 
 /// Inputs of [`disparity_to_dsm`].
@@ -164,6 +169,7 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
     let grid = match &opts.grid {
         GridChoice::Like(path) => DsmGrid::read(path, Some(zone))
             .with_context(|| format!("reading the grid of {}", path.display()))?,
+        GridChoice::Exact(grid) => grid.clone(),
         GridChoice::Resolution {
             resolution,
             bounds,
@@ -301,7 +307,8 @@ pub fn finish_dsm(
     Ok(dsm)
 }
 
-/// A grid at `resolution` over `bounds`, or over the points' UTM extent.
+/// A grid of `resolution` metres over `bounds`, or over the points' extent, in `epsg` or the
+/// points' UTM zone.
 fn grid_for(
     points: &Points,
     resolution: f64,
@@ -314,14 +321,10 @@ fn grid_for(
             .iter()
             .filter(|p| p.iter().all(|v| v.is_finite()))
     };
-    let zone = match epsg {
-        Some(code) => UtmZone::from_epsg(code)?,
-        None => {
-            let n = valid().count() as f64;
-            let (lon, lat) = valid().fold((0.0, 0.0), |(a, b), p| (a + p[0] / n, b + p[1] / n));
-            UtmZone::from_lonlat(lon, lat)
-        }
-    };
+    let n = valid().count() as f64;
+    let (lon, lat) = valid().fold((0.0, 0.0), |(a, b), p| (a + p[0] / n, b + p[1] / n));
+    let crs = Crs::from_epsg(epsg.unwrap_or(UtmZone::from_lonlat(lon, lat).epsg()))?;
+    let resolution = crs.cell_size(resolution, lon, lat);
     let [x_min, y_min, x_max, y_max] = match bounds {
         Some(b) => b,
         None => valid().fold(
@@ -332,7 +335,7 @@ fn grid_for(
                 f64::NEG_INFINITY,
             ],
             |b, p| {
-                let (e, n) = zone.forward(p[0], p[1]);
+                let (e, n) = crs.forward(p[0], p[1]);
                 [
                     b[0].min(e),
                     b[1].min(n),
@@ -348,7 +351,7 @@ fn grid_for(
         x_max,
         y_max,
         resolution,
-        zone.epsg(),
+        crs.epsg(),
     )?)
 }
 

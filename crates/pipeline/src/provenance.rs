@@ -122,13 +122,14 @@ fn grid_json(grid: &GridChoice) -> Value {
             bounds,
             epsg,
         } => json!({ "resolution": resolution, "bounds": bounds, "epsg": epsg }),
+        GridChoice::Exact(grid) => json!(grid),
     }
 }
 
 fn grid_input(grid: &GridChoice) -> Option<&Path> {
     match grid {
         GridChoice::Like(p) => Some(p.as_path()),
-        GridChoice::Resolution { .. } => None,
+        GridChoice::Resolution { .. } | GridChoice::Exact(_) => None,
     }
 }
 

@@ -36,7 +36,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use camera::rectify::{Rectification, Roi, Shear};
-use camera::{DsmGrid, RpcModel, UtmZone};
+use camera::{Crs, DsmGrid, RpcModel, UtmZone};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -668,8 +668,7 @@ fn tiles_at_once(matcher: &Matcher, max_memory: u64, largest: u64, todo: usize) 
 
 /// The benchmark's scores of the written DSM against a ground-truth DSM on its grid.
 pub(crate) fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmScores> {
-    let zone = UtmZone::from_epsg(grid.epsg)?;
-    let truth = crate::score::read_truth(truth, zone)?;
+    let truth = crate::score::read_truth(truth, grid.nearest_zone())?;
     crate::score::score_dsm_file(dsm, &truth)
 }
 
@@ -695,7 +694,8 @@ fn claim_work_folder(work: &Path, settings: &SceneSettings) -> Result<()> {
 }
 
 /// The DSM grid: the given DSM's, or `resolution` metres over `bounds` or over the ground
-/// footprint of the region (its outline localized at the lowest and highest altitudes).
+/// footprint of the region (its outline localized at the lowest and highest altitudes), in the
+/// scene's UTM zone or the given CRS.
 fn scene_grid(
     choice: &GridChoice,
     rpc_left: &RpcModel,
@@ -707,50 +707,50 @@ fn scene_grid(
     match choice {
         GridChoice::Like(path) => DsmGrid::read(path, Some(camera_zone))
             .with_context(|| format!("reading the grid of {}", path.display())),
+        GridChoice::Exact(grid) => Ok(grid.clone()),
         GridChoice::Resolution {
             resolution,
             bounds,
             epsg,
         } => {
-            let zone = match epsg {
-                Some(code) => UtmZone::from_epsg(*code)?,
-                None => camera_zone,
-            };
+            let crs = Crs::from_epsg(epsg.unwrap_or(camera_zone.epsg()))?;
+            let cell = crs.cell_size(*resolution, rpc_left.lon_offset, rpc_left.lat_offset);
             let [x_min, y_min, x_max, y_max] = match bounds {
                 Some(b) => *b,
-                None => {
-                    // Cells aligned on multiples of the resolution, as GDAL's -tap does.
-                    let [x0, y0, x1, y1] = footprint(rpc_left, roi, alt_range, zone)?;
-                    let snap = |v: f64, up: bool| {
-                        let k = v / resolution;
-                        resolution * if up { k.ceil() } else { k.floor() }
-                    };
-                    [
-                        snap(x0, false),
-                        snap(y0, false),
-                        snap(x1, true),
-                        snap(y1, true),
-                    ]
-                }
+                None => snap_outwards(footprint(rpc_left, roi, alt_range, crs)?, cell),
             };
             Ok(DsmGrid::from_bounds(
                 x_min,
                 y_min,
                 x_max,
                 y_max,
-                *resolution,
-                zone.epsg(),
+                cell,
+                crs.epsg(),
             )?)
         }
     }
 }
 
-/// UTM bounds of the region's outline localized at both ends of the altitude range.
+/// Bounds `b` snapped outwards to multiples of `cell`, as GDAL's `-tap` aligns cells.
+pub(crate) fn snap_outwards(b: [f64; 4], cell: f64) -> [f64; 4] {
+    let snap = |v: f64, up: bool| {
+        let k = v / cell;
+        cell * if up { k.ceil() } else { k.floor() }
+    };
+    [
+        snap(b[0], false),
+        snap(b[1], false),
+        snap(b[2], true),
+        snap(b[3], true),
+    ]
+}
+
+/// Bounds in `crs` of the region's outline localized at both ends of the altitude range.
 pub(crate) fn footprint(
     rpc: &RpcModel,
     roi: Roi,
     alt_range: (f64, f64),
-    zone: UtmZone,
+    crs: &Crs,
 ) -> Result<[f64; 4]> {
     let (x0, y0) = (roi.x as f64, roi.y as f64);
     let (x1, y1) = (x0 + roi.width as f64, y0 + roi.height as f64);
@@ -768,7 +768,7 @@ pub(crate) fn footprint(
                 let (lon, lat) = rpc
                     .localization(x, y, alt)
                     .context("localizing the region's outline with the left RPC")?;
-                let (e, n) = zone.forward(lon, lat);
+                let (e, n) = crs.forward(lon, lat);
                 b = [b[0].min(e), b[1].min(n), b[2].max(e), b[3].max(n)];
             }
         }

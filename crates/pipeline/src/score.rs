@@ -15,7 +15,7 @@ use crate::eval::versus::{score_versus, Versus};
 use crate::eval::Truth;
 
 /// The UTM zone of a truth without its own (a DFC2019 plain TIFF + `.txt`): `zone` when given,
-/// else that of the DSM to score (its GeoTIFF EPSG code).
+/// else that of the DSM to score (its GeoTIFF EPSG code, or its centre's zone in another CRS).
 pub fn truth_zone(dsm: &Path, zone: Option<UtmZone>) -> Result<UtmZone> {
     if let Some(z) = zone {
         return Ok(z);
@@ -30,7 +30,7 @@ pub fn truth_zone(dsm: &Path, zone: Option<UtmZone>) -> Result<UtmZone> {
             dsm.display()
         )
     })?;
-    Ok(grid.zone())
+    Ok(grid.nearest_zone())
 }
 
 /// The truth of a `<AOI>_DSM.tif` path: the DSM, and the `<AOI>_CLS.tif` and `<AOI>_WATER.png`
@@ -75,10 +75,9 @@ pub fn score_versus_files(ours: &Path, other: &Path, truth: &Truth) -> Result<Ve
 /// The heights of the DSM at `path` on the truth's grid: as they are when the DSM lies on it,
 /// else cut onto it as the benchmark crops any georeferenced DSM onto the truth's window
 /// ([`camera::resample_nearest`]: the nearest cell, NaN outside; a resampling for another cell
-/// size or UTM zone). A DSM that covers none of the truth is an error.
+/// size or CRS). A DSM that covers none of the truth is an error.
 pub fn read_on_truth_grid(path: &Path, truth: &Truth) -> Result<raster::Image> {
-    let zone = truth.grid.zone();
-    let DsmRaster { image, grid, .. } = camera::read_dsm(path, Some(zone))
+    let DsmRaster { image, grid, .. } = camera::read_dsm(path, truth.grid.zone())
         .with_context(|| format!("reading the DSM {}", path.display()))?;
     if grid == truth.grid {
         return Ok(image);
@@ -86,20 +85,15 @@ pub fn read_on_truth_grid(path: &Path, truth: &Truth) -> Result<raster::Image> {
     let cut = camera::resample_nearest(&image, &grid, &truth.grid);
     if !cut.data().iter().any(|v| v.is_finite()) {
         bail!(
-            "{}: the DSM has no height inside the ground truth's area ({} m cells from {:.2}, \
-             {:.2}, EPSG {}; the truth's {}x{} cells of {} m from {:.2}, {:.2}, EPSG {}): is it \
-             of another area, or in another UTM zone than its tags say?",
+            "{}: the DSM has no height inside the ground truth's area ({grid} from {:.2}, \
+             {:.2}; the truth's {} from {:.2}, {:.2}): is it of another area, or in another \
+             CRS than its tags say?",
             path.display(),
-            grid.resolution,
             grid.x0,
             grid.y0,
-            grid.epsg,
-            truth.grid.width,
-            truth.grid.height,
-            truth.grid.resolution,
+            truth.grid,
             truth.grid.x0,
             truth.grid.y0,
-            truth.grid.epsg
         );
     }
     Ok(cut)

@@ -243,6 +243,7 @@ pub fn write_world_truth(world: &World, files: &TruthFiles) -> Result<DsmGrid> {
         georef: Some(grid.georeference()),
         nodata: None,
         rpc: None,
+        gdal_metadata: None,
     };
     write_geotiff(&files.cls, &cls, &meta)
         .with_context(|| format!("writing {}", files.cls.display()))?;

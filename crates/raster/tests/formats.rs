@@ -303,6 +303,7 @@ fn utm_meta() -> GeoTiffMeta {
         )),
         nodata: Some(f64::NAN),
         rpc: None,
+        gdal_metadata: None,
     }
 }
 
@@ -338,6 +339,7 @@ fn geotiff_keeps_rpc_rotation_geographic_and_numeric_nodata() {
         georef: Some(georef.clone()),
         nodata: Some(-9999.0),
         rpc: Some(RpcTag::from_coefficients(&coeffs).unwrap()),
+        gdal_metadata: None,
     };
     let img = Image::from_fn(9, 4, |x, y| (x * 10 + y) as f32);
     write_geotiff(&p, &img, &meta).unwrap();
@@ -1006,6 +1008,7 @@ fn s2p_dsm_reads_and_round_trips() {
             georef: Some(fresh),
             nodata: Some(f64::NAN),
             rpc: None,
+            gdal_metadata: None,
         },
     )
     .unwrap();

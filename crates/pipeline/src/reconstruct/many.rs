@@ -31,7 +31,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use camera::rectify::Roi;
-use camera::{write_dsm, DsmGrid, Gridding, UtmZone};
+use camera::{write_dsm, Crs, DsmGrid, Gridding, UtmZone};
 use dataset::shard::Shard;
 use raster::Image;
 use serde::Serialize;
@@ -744,13 +744,16 @@ fn co_register(reference: &Path, path: &Path, grid: &DsmGrid) -> Result<Shift> {
     )
 }
 
-/// The UTM zone of the scene: the grid's when given, else the first camera's.
+/// The UTM zone of the scene, where the pairs are chosen: the grid's when it is UTM, else the
+/// first camera's.
 fn scene_zone(opts: &ReconstructManyOptions) -> Result<UtmZone> {
     if let GridChoice::Resolution {
         epsg: Some(code), ..
     } = &opts.grid
     {
-        return Ok(UtmZone::from_epsg(*code)?);
+        if let Some(zone) = Crs::from_epsg(*code)?.utm_zone() {
+            return Ok(zone);
+        }
     }
     let first = &opts.images[0];
     let raw = RawImage::open(first, "first")?;
@@ -807,7 +810,7 @@ fn open_views(
         };
         let (alt_range, _) = altitude_range(opts.alt_range, &rpc, &rpc)?;
         let (w, h) = raw.size();
-        let fp = footprint(&rpc, Roi::full(w, h), alt_range, zone)
+        let fp = footprint(&rpc, Roi::full(w, h), alt_range, &Crs::Utm(zone))
             .with_context(|| format!("the ground footprint of {}", image.display()))?;
         views.push(View {
             image: image.clone(),
@@ -908,7 +911,7 @@ fn adjust_cameras(
         v.rpc = crate::dsm::read_camera(path)?;
         v.rpc_file = Some(path.clone());
         let (w, h) = RawImage::open(&v.image, "input")?.size();
-        v.footprint = footprint(&v.rpc, Roi::full(w, h), range, zone)
+        v.footprint = footprint(&v.rpc, Roi::full(w, h), range, &Crs::Utm(zone))
             .with_context(|| format!("the ground footprint of {}", v.image.display()))?;
     }
     Ok(pointing)
@@ -1093,25 +1096,34 @@ fn common_grid(
                 .with_context(|| format!("reading the grid of {}", p.display()))?;
             Ok((grid, opts.grid.clone()))
         }
+        GridChoice::Exact(grid) => Ok((grid.clone(), opts.grid.clone())),
         GridChoice::Resolution {
-            resolution, bounds, ..
+            resolution,
+            bounds,
+            epsg,
         } => {
-            let b = bounds.unwrap_or_else(|| union_bounds(chosen, *resolution));
-            let grid = DsmGrid::from_bounds(b[0], b[1], b[2], b[3], *resolution, zone.epsg())?;
-            let choice = GridChoice::Resolution {
-                resolution: *resolution,
-                bounds: Some(b),
-                epsg: Some(zone.epsg()),
+            let crs = Crs::from_epsg(epsg.unwrap_or(zone.epsg()))?;
+            let utm = Crs::Utm(zone);
+            let b = match bounds {
+                Some(b) => *b,
+                None => crs.bounds_of(&utm, union_bounds(chosen)),
             };
-            Ok((grid, choice))
+            let (lon, lat) = crs.inverse((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
+            let cell = crs.cell_size(*resolution, lon, lat);
+            let b = if bounds.is_some() {
+                b
+            } else {
+                super::snap_outwards(b, cell)
+            };
+            let grid = DsmGrid::from_bounds(b[0], b[1], b[2], b[3], cell, crs.epsg())?;
+            Ok((grid.clone(), GridChoice::Exact(grid)))
         }
     }
 }
 
-/// The union of the pairs' overlaps, snapped outwards to multiples of `resolution` (as GDAL's
-/// `-tap`).
-fn union_bounds(chosen: &[PairChoice], resolution: f64) -> [f64; 4] {
-    let u = chosen.iter().fold(
+/// The union of the pairs' overlaps (UTM).
+fn union_bounds(chosen: &[PairChoice]) -> [f64; 4] {
+    chosen.iter().fold(
         [
             f64::INFINITY,
             f64::INFINITY,
@@ -1127,17 +1139,7 @@ fn union_bounds(chosen: &[PairChoice], resolution: f64) -> [f64; 4] {
                 u[3].max(o[3]),
             ]
         },
-    );
-    let snap = |v: f64, up: bool| {
-        let k = v / resolution;
-        resolution * if up { k.ceil() } else { k.floor() }
-    };
-    [
-        snap(u[0], false),
-        snap(u[1], false),
-        snap(u[2], true),
-        snap(u[3], true),
-    ]
+    )
 }
 
 /// Bytes per fused cell held at once: heights, counts, spreads, confidences, and the filled and

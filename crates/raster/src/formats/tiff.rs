@@ -19,7 +19,7 @@ use crate::{Image, RasterError, Result};
 pub(super) const TAG_RPC: u16 = 50844;
 /// GDAL's metadata tag: an XML `<GDALMetadata>` of name/value items (NITF header fields and the
 /// like of a converted satellite image).
-const TAG_GDAL_METADATA: u16 = 42112;
+pub(super) const TAG_GDAL_METADATA: u16 = 42112;
 const KEY_MODEL_TYPE: u16 = 1024;
 const KEY_RASTER_TYPE: u16 = 1025;
 const KEY_GEOGRAPHIC_TYPE: u16 = 2048;
@@ -43,6 +43,7 @@ impl GeoRaster {
             georef: self.georef.clone(),
             nodata: self.nodata,
             rpc: self.rpc.clone(),
+            gdal_metadata: None,
         }
     }
 }
@@ -53,6 +54,9 @@ pub struct GeoTiffMeta {
     pub georef: Option<GeoReference>,
     pub nodata: Option<f64>,
     pub rpc: Option<RpcTag>,
+    /// GDAL's metadata (tag 42112, `<GDALMetadata>…</GDALMetadata>`): band descriptions, units
+    /// and dataset items that GDAL, QGIS and rasterio show.
+    pub gdal_metadata: Option<String>,
 }
 
 /// Where a raster lies: GDAL's affine geotransform and the coordinate system.
@@ -278,6 +282,7 @@ impl TiffReader {
             georef: self.georef.clone(),
             nodata: self.nodata,
             rpc: self.rpc.clone(),
+            gdal_metadata: self.gdal_metadata.clone(),
         }
     }
 
@@ -552,6 +557,7 @@ pub(super) struct GeoTags {
     pub ascii: Option<String>,
     pub nodata: Option<String>,
     pub rpc: Option<Vec<f64>>,
+    pub gdal_metadata: Option<String>,
 }
 
 pub(super) fn geo_tags(meta: &GeoTiffMeta) -> std::result::Result<GeoTags, String> {
@@ -570,6 +576,7 @@ pub(super) fn geo_tags(meta: &GeoTiffMeta) -> std::result::Result<GeoTags, Strin
             }
         }),
         rpc: meta.rpc.as_ref().map(RpcTag::to_coefficients),
+        gdal_metadata: meta.gdal_metadata.clone(),
     };
     if let Some(g) = &meta.georef {
         let mut gt = g.geotransform;
@@ -691,6 +698,9 @@ fn encode_n<W: Write + Seek, K: TiffKind, const N: usize>(
     }
     if let Some(r) = &tags.rpc {
         d.write_tag(Tag::Unknown(TAG_RPC), &r[..])?;
+    }
+    if let Some(m) = &tags.gdal_metadata {
+        d.write_tag(Tag::Unknown(TAG_GDAL_METADATA), m.as_str())?;
     }
     im.write_data(image.data())
 }

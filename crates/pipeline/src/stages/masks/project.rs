@@ -23,7 +23,7 @@ pub fn render_into_image(
     (width, height): (usize, usize),
 ) -> Image {
     let (gw, gh) = altitude.size();
-    let zone = grid.zone();
+    let crs = grid.crs();
     let step = grid.resolution / SAMPLES as f64;
     // One exact projection per cell (its centre); the samples inside the cell are placed by the
     // camera's ground-to-image Jacobian at the grid's centre (the RPC is affine to far below a
@@ -47,7 +47,7 @@ pub fn render_into_image(
     let jacobian = {
         let (e, n) = centre(gw as f64 / 2.0, gh as f64 / 2.0);
         let at = |e: f64, n: f64| {
-            let (lon, lat) = zone.inverse(e, n);
+            let (lon, lat) = crs.inverse(e, n);
             rpc.projection(lon, lat, mid_alt)
         };
         let d = 1.0;
@@ -83,7 +83,7 @@ pub fn render_into_image(
                     continue;
                 }
                 let (e, n) = centre(col as f64, row as f64);
-                let (lon, lat) = zone.inverse(e, n);
+                let (lon, lat) = crs.inverse(e, n);
                 let (xc, yc) = rpc.projection(lon, lat, alt as f64);
                 for &(ox, oy) in &offsets {
                     let (x, y) = ((xc + ox).round(), (yc + oy).round());
@@ -122,9 +122,9 @@ mod tests {
 
     /// A nadir camera over the grid, 3 px per metre: col ∝ lon, row ∝ −lat.
     fn nadir_camera(grid: &DsmGrid) -> RpcModel {
-        let zone = grid.zone();
-        let (lon0, lat0) = zone.inverse(grid.x0, grid.y0);
-        let (lon1, lat1) = zone.inverse(grid.x0 + 4.0, grid.y0 - 4.0);
+        let crs = grid.crs();
+        let (lon0, lat0) = crs.inverse(grid.x0, grid.y0);
+        let (lon1, lat1) = crs.inverse(grid.x0 + 4.0, grid.y0 - 4.0);
         RpcModel::nadir(
             [0.0, 0.0, lat0, lon0, 0.0],
             [12.0, 12.0, lat0 - lat1, lon1 - lon0, 1.0],

@@ -143,7 +143,7 @@ impl ClassTruth {
 
     /// The benchmark's shift of a DSM on the truth grid (the released evaluator's NCC search).
     pub fn register(&self, dsm: &Path) -> Result<Alignment> {
-        let pred = read_dsm(dsm, Some(self.grid.zone()))
+        let pred = read_dsm(dsm, self.grid.zone())
             .with_context(|| format!("reading the registration DSM {}", dsm.display()))?;
         if pred.grid != self.grid {
             bail!(

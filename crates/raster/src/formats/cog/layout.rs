@@ -2,7 +2,7 @@
 //! they come first in the file, the tile data after them.
 
 use super::{Sample, COG_TILE};
-use crate::formats::tiff::{GeoTags, TAG_RPC};
+use crate::formats::tiff::{GeoTags, TAG_GDAL_METADATA, TAG_RPC};
 
 /// TIFF field types.
 const SHORT: u16 = 3;
@@ -206,6 +206,9 @@ fn directory(
         }
         if let Some(r) = &tags.rpc {
             e.push(Entry::doubles(TAG_RPC, r));
+        }
+        if let Some(m) = &tags.gdal_metadata {
+            e.push(Entry::ascii(TAG_GDAL_METADATA, m));
         }
     }
     e.sort_by_key(|x| x.tag);

@@ -77,6 +77,7 @@ mod tests {
             )),
             nodata: Some(f64::NAN),
             rpc: None,
+            gdal_metadata: None,
         };
         write_cog(&path, &img, &meta).unwrap();
         let back = read_tiff(&path).unwrap();
@@ -168,6 +169,7 @@ mod tests {
             )),
             nodata: Some(f64::NAN),
             rpc: None,
+            gdal_metadata: None,
         };
         for (w, h, bands) in [
             (1, 1, 1),
