@@ -260,14 +260,18 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     ``median_filter``, ``roi``, ``roi_lonlat``, ``alt_range``, ``tile``, ``collar``, ``max_memory`` (GiB),
     ``work``, ``shard`` ("I/N"), ``merge``, ``keep_intermediates``, ``single_view``,
     ``no_pointing_correction``, ``threads`` (this call's
-    worker threads; default every core) and the matcher's options of :func:`predict`. Without
+    worker threads; default every core), the products beside the DSM (``ortho``: a true
+    orthoimage GeoTIFF on its grid; ``ortho_blend``: ``"nadir"`` or ``"median"``; ``points``: a
+    ``.las``/``.laz``/``.ply`` point cloud of the measured cells; ``preview``: a PNG quicklook)
+    and the matcher's options of :func:`predict`. Heights are above the WGS84 ellipsoid; ``epsg``
+    takes any projected or geographic code (e.g. 4326, 3857). Without
     ``rpc_left``/``rpc_right`` each image's camera is found beside it as the command finds it (a
     vendor ``.RPB``, ``_RPC.TXT``, DIMAP ``RPC_*.XML``, else the TIFF's RPC tag), so a vendor
     delivery needs no camera argument. Returns the tiles (``failed`` ones included: the DSM holds the others),
     the DSM's grid and coverage, ``scores`` (with ``truth``), each step's ``seconds``,
     ``pointing`` (the right camera's correction and residual per image, the tie points'
-    altitudes; None with ``no_pointing_correction``) and the
-    ``warnings`` the command prints (also issued as Python warnings).
+    altitudes; None with ``no_pointing_correction``), ``products`` (points written, seconds;
+    None without products) and the ``warnings`` the command prints (also issued as Python warnings).
 
     An existing ``out`` raises ``FileExistsError`` (the command line's message) unless
     ``overwrite=True`` or it is the DSM of an earlier run of the same ``work`` folder (resumed).
@@ -300,7 +304,9 @@ def reconstruct_many(images: "Union[PathLike, Iterable[PathLike]]", rpc_dir: Opt
     ``resolution``, ``epsg``,
     ``truth``,
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
-    call's worker threads; default every core) and the matcher's options of :func:`predict`.
+    call's worker threads; default every core), the products ``ortho`` (from every image),
+    ``ortho_blend``, ``points``, ``preview`` (as :func:`reconstruct`) and the matcher's options
+    of :func:`predict`.
 
     Returns the report's content: ``views``, ``pointing`` (each image's correction and
     residuals, the pairs tied, the tie points' altitudes), ``cameras`` (the corrected cameras as

@@ -120,6 +120,21 @@ impl<'py> Keywords<'py> {
         Ok(())
     }
 
+    /// `ortho`, `ortho_blend` ("nadir" or "median"), `points`, `preview`: the products written
+    /// beside the DSM, as the command line's `--ortho`, `--ortho-blend`, `--points`, `--preview`.
+    pub fn products(&self) -> PyResult<seasonstereo::Products> {
+        let mut products = seasonstereo::Products {
+            ortho: self.path("ortho")?,
+            points: self.path("points")?,
+            preview: self.path("preview")?,
+            ..Default::default()
+        };
+        if let Some(blend) = self.take::<String>("ortho_blend")? {
+            products.ortho_blend = flags::ortho_blend(&blend).map_err(exception)?;
+        }
+        Ok(products)
+    }
+
     /// `tile`, `collar` (pixels) and `max_memory` (GiB) over the given defaults: the tiling of
     /// every command that runs tiles.
     pub fn tiling(

@@ -84,6 +84,7 @@ fn many_options(
     }
     o.both_views = !k.take("single_view")?.unwrap_or(false);
     o.adjust_pointing = !k.take("no_pointing_correction")?.unwrap_or(false);
+    o.products = k.products()?;
     o.truth = k.path("truth")?;
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;

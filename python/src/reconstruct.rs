@@ -71,6 +71,7 @@ fn reconstruct_options(
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
     o.both_views = !k.take("single_view")?.unwrap_or(false);
     o.adjust_pointing = !k.take("no_pointing_correction")?.unwrap_or(false);
+    o.products = k.products()?;
     shard_keywords(k, &mut o)?;
     Ok(o)
 }

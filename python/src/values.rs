@@ -87,6 +87,7 @@ pub fn reconstruct_summary(s: &ReconstructSummary, o: &ReconstructOptions) -> Py
         .collect();
     let scores = serde_json::to_value(&s.scores).map_err(crate::errors::value_error)?;
     let pointing = serde_json::to_value(&s.pointing).map_err(crate::errors::value_error)?;
+    let products = serde_json::to_value(&s.products).map_err(crate::errors::value_error)?;
     Ok(json!({
         "stem": s.stem, "work": s.work,
         "tiles": {
@@ -97,5 +98,6 @@ pub fn reconstruct_summary(s: &ReconstructSummary, o: &ReconstructOptions) -> Py
         "disparity_range": s.disparity_range(), "matched": s.matched(),
         "dsm": s.dsm.as_ref().map(dsm_summary), "scores": scores, "seconds": seconds,
         "output": o.output, "warnings": s.warnings(o), "pointing": pointing,
+        "products": products,
     }))
 }

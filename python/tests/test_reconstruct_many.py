@@ -67,7 +67,8 @@ def test_a_vendor_delivery_needs_no_camera_and_gives_its_corrected_cameras(dev, 
     images = [dev / "vendor" / f"JAX_068_{d}_RGB.TIF" for d in DATES]
     truth = dev / "truth" / "JAX_068_DSM.tif"
     s = seasonstereo.reconstruct_many(images, out=tmp_path / "dsm.tif", pairs=2, like=truth,
-                                      truth=truth)
+                                      truth=truth, ortho=tmp_path / "ortho.tif",
+                                      points=tmp_path / "points.las")
     assert [p["status"] for p in s["pairs"]] == ["done", "done"]
     assert all(v["date"] for v in s["views"]), "dates from the .IMD files"
     assert sorted(s["cameras"]) == [f"JAX_068_{d}_RGB" for d in DATES]
@@ -81,3 +82,23 @@ def test_a_vendor_delivery_needs_no_camera_and_gives_its_corrected_cameras(dev, 
     lo, hi = s["pointing"]["alt_range"]
     assert -60 < lo < -20 and 25 < hi < 70
     assert s["scores"]["mae_filtered"] < 1.2
+    # The products, as GDAL (rasterio) and laspy read them: the orthoimage on the DSM's grid,
+    # the DSM saying what its heights are, the point cloud with its count, CRS and colours.
+    rasterio = pytest.importorskip("rasterio")
+    laspy = pytest.importorskip("laspy")
+    with rasterio.open(tmp_path / "dsm.tif") as dsm, rasterio.open(tmp_path / "ortho.tif") as o:
+        assert (o.crs, o.transform, o.shape) == (dsm.crs, dsm.transform, dsm.shape)
+        assert o.count == 3 and o.dtypes == ("uint8",) * 3 and o.nodata == 0
+        assert dsm.descriptions == ("height above the WGS84 ellipsoid",)
+        assert dsm.units == ("metre",)
+        assert "EPSG:4979" in dsm.tags()["VERTICAL_REFERENCE"]
+        heights, counts = dsm.read(1), rasterio.open(tmp_path / "dsm_count.tif").read(1)
+        rgb = o.read()
+    measured = int(((heights == heights) & (counts > 0)).sum())
+    assert s["products"]["points"] == measured
+    cloud = laspy.read(tmp_path / "points.las")
+    assert len(cloud.points) == measured
+    keys = next(v for v in cloud.header.vlrs if v.record_id == 34735).geo_keys
+    assert any(k.id == 3072 and k.value_offset == 32617 for k in keys)
+    coloured = (cloud.red > 0) | (cloud.green > 0) | (cloud.blue > 0)
+    assert coloured.mean() > 0.99 and (rgb.sum(axis=0) > 0).mean() > 0.5

@@ -390,3 +390,65 @@ impl GridArgs {
         pipeline::flags::grid(self.like.clone(), self.resolution, None, self.epsg)
     }
 }
+
+/// How the orthoimage picks a cell's colour among the views.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum OrthoBlendArg {
+    /// The most nadir view that sees the cell (the sharpest).
+    Nadir,
+    /// Per channel, the median of the views that see it (evens out the dates' lighting).
+    Median,
+}
+
+/// The products written beside the DSM.
+#[derive(Args)]
+pub struct ProductArgs {
+    /// Write a true orthoimage on the DSM's grid here: an RGB GeoTIFF (uint8, nodata 0) with the
+    /// DSM's georeference, each cell coloured from a view that sees it (occlusions found with
+    /// the DSM), so roofs sit on their footprints.
+    #[arg(long, value_name = "FILE.tif")]
+    pub ortho: Option<PathBuf>,
+    /// How the orthoimage picks a colour among the views (reconstruct-many: every image).
+    #[arg(long, value_enum, default_value_t = OrthoBlendArg::Nadir)]
+    pub ortho_blend: OrthoBlendArg,
+    /// Write a point cloud here, one point per measured cell (filled cells left out) at the
+    /// cell's centre in the DSM's CRS, coloured from the views: `.las` (LAS 1.2, EPSG in its
+    /// GeoTIFF keys), `.laz` (compressed) or `.ply` (binary, s2p's layout).
+    #[arg(long, value_name = "FILE")]
+    pub points: Option<PathBuf>,
+    /// Write a quicklook of the DSM here: a PNG of the heights in colour over a hillshade
+    /// (transparent where no height), at most 2048 pixels a side.
+    #[arg(long, value_name = "FILE.png")]
+    pub preview: Option<PathBuf>,
+}
+
+impl ProductArgs {
+    /// The library's products.
+    pub fn products(&self) -> seasonstereo::Products {
+        seasonstereo::Products {
+            ortho: self.ortho.clone(),
+            ortho_blend: match self.ortho_blend {
+                OrthoBlendArg::Nadir => seasonstereo::OrthoBlend::MostNadir,
+                OrthoBlendArg::Median => seasonstereo::OrthoBlend::Median,
+            },
+            points: self.points.clone(),
+            preview: self.preview.clone(),
+        }
+    }
+}
+
+/// What the log says of the products written: `wrote o.tif, p.las (1234 points) in 1.2 s`.
+pub fn products_line(
+    products: &seasonstereo::Products,
+    written: &seasonstereo::ProductsWritten,
+) -> String {
+    let names: Vec<String> = products
+        .paths()
+        .iter()
+        .map(|p| match (&products.points, written.points) {
+            (Some(points), Some(n)) if points == p => format!("{} ({n} points)", p.display()),
+            _ => p.display().to_string(),
+        })
+        .collect();
+    format!("wrote {} in {:.1} s", names.join(", "), written.seconds)
+}

@@ -12,7 +12,8 @@ use seasonstereo::{
 use pipeline::flags;
 
 use crate::args::{
-    parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs, ShardArg, TilingArgs,
+    parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs, ProductArgs,
+    ShardArg, TilingArgs,
 };
 
 #[derive(Args)]
@@ -106,6 +107,8 @@ pub struct ReconstructArgs {
     work: Option<PathBuf>,
     #[command(flatten)]
     grid: GridArgs,
+    #[command(flatten)]
+    products: ProductArgs,
     /// Height of a cell from its points. Default median: robust, the DSM to use. `max` is the
     /// benchmark's protocol (what `seasonstereo eval` does).
     #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
@@ -157,6 +160,9 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
         return Ok(());
     };
     println!("{}", dsm_line(&s, dsm, &output));
+    if let Some(written) = &s.products {
+        println!("{}", crate::args::products_line(&options.products, written));
+    }
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
@@ -214,6 +220,7 @@ impl ReconstructArgs {
             both_views: !self.single_view,
             level_ground: true,
             adjust_pointing: !self.no_pointing_correction,
+            products: self.products.products(),
         })
     }
 }

@@ -10,7 +10,7 @@ use seasonstereo::{
     ReconstructManySummary, View,
 };
 
-use crate::args::{parse_alt_range, GridArgs, GriddingArg, MatcherArgs, TilingArgs};
+use crate::args::{parse_alt_range, GridArgs, GriddingArg, MatcherArgs, ProductArgs, TilingArgs};
 
 #[derive(Args)]
 #[command(
@@ -105,6 +105,8 @@ pub struct ReconstructManyArgs {
     work: Option<PathBuf>,
     #[command(flatten)]
     grid: GridArgs,
+    #[command(flatten)]
+    products: ProductArgs,
     /// Score the fused DSM and every pair's against this truth <AOI>_DSM.tif; needs --like on
     /// the same file.
     #[arg(long, value_name = "DSM", requires = "like")]
@@ -145,7 +147,8 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     // 10 ms (mimalloc's default) instead of never (allocator.rs), or the process would hold every
     // pair's peak at once and overshoot --max-memory (2.25 GB for 12 dev pairs at 2 GiB).
     crate::allocator::return_freed_pages_after(10);
-    let s = reconstruct_many(&a.options()?, progress)?;
+    let options = a.options()?;
+    let s = reconstruct_many(&options, progress)?;
     print_pairs(&s.chosen, &s.views, s.candidates);
     if s.pairs.is_empty() {
         return Ok(());
@@ -168,6 +171,9 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
         return partial_if_incomplete(&s);
     };
     println!("{}", fused_line(&s, f));
+    if let Some(written) = &s.products {
+        println!("{}", crate::args::products_line(&options.products, written));
+    }
     if let Some(sc) = &s.scores {
         println!("vs truth: {}", crate::score::format_scores(sc));
     }
@@ -221,6 +227,7 @@ impl ReconstructManyArgs {
         o.truth = self.truth;
         o.alt_range = self.alt_range;
         o.adjust_pointing = !self.no_pointing_correction;
+        o.products = self.products.products();
         o.gridding = self.gridding.into();
         (o.tile, o.collar) = (self.tiling.tile, self.tiling.collar);
         o.max_memory = self.tiling.max_memory_bytes()?;

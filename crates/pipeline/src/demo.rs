@@ -32,9 +32,10 @@ use dsms::{read_world_truth, score_dsms, triangulate_dsms};
 use laps::Laps;
 use report::{write_report, ReportContext};
 
-pub use figures::{dsm_picture, hillshade, thumbnail};
+pub use figures::thumbnail;
 pub use format::{matcher_flags, metres, percent, pixels};
 pub use many_dates::{ChosenPair, ManyDatesResult, MANY_DATES_SIZE};
+pub use products::{dsm_picture, hillshade};
 pub use summary::{DemoOptions, DemoSummary, DsmResult, PairResult};
 
 /// The `season` variant of one view of a world (image id `id`) by the built-in appearance model,

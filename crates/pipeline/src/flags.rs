@@ -192,6 +192,15 @@ pub fn gridding(name: &str) -> Result<camera::Gridding> {
     }
 }
 
+/// `--ortho-blend`: `nadir` or `median`.
+pub fn ortho_blend(name: &str) -> Result<products::OrthoBlend> {
+    match name.trim().to_ascii_lowercase().as_str() {
+        "nadir" => Ok(products::OrthoBlend::MostNadir),
+        "median" => Ok(products::OrthoBlend::Median),
+        _ => bail!("unknown ortho_blend {name:?}: expected nadir or median"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

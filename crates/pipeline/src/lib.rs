@@ -12,6 +12,7 @@
 pub mod demo;
 pub mod dsm;
 pub mod eval;
+pub mod finished;
 pub mod flags;
 pub mod jobs;
 pub mod matcher;

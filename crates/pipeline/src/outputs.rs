@@ -314,6 +314,29 @@ impl fmt::Display for Incomplete {
 
 impl std::error::Error for Incomplete {}
 
+/// Refuses products (`--ortho`, `--points`, `--preview`) of the wrong format, that are inputs,
+/// that are the DSM itself, or that exist and are not this run's; adds them to `outputs` (what
+/// the run's provenance checks).
+pub fn check_products(
+    products: &products::Products,
+    dsm: &Path,
+    inputs: &[&Path],
+    outputs: &mut Vec<PathBuf>,
+) -> Result<()> {
+    products.check()?;
+    for path in products.paths() {
+        if resolve(path) == resolve(dsm) {
+            bail!(
+                "{}: a product cannot be written over the DSM (-o): give another file name",
+                path.display()
+            );
+        }
+        check_output_file("a product", path, inputs, true)?;
+        outputs.push(path.to_path_buf());
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

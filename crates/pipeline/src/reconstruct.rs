@@ -82,6 +82,8 @@ pub struct ReconstructSummary {
     /// The pointing correction of the right camera and the tie points' altitudes, when the
     /// pair was adjusted.
     pub pointing: Option<pointing::Pointing>,
+    /// The products written beside the DSM, when asked for.
+    pub products: Option<products::ProductsWritten>,
 }
 
 impl ReconstructSummary {
@@ -322,6 +324,7 @@ pub fn reconstruct(
         scores: None,
         seconds,
         pointing: pair.pointing.clone(),
+        products: None,
     };
     if opts.tiles_only {
         return Ok(summary);
@@ -356,6 +359,22 @@ pub fn reconstruct(
     summary.seconds.push(("merge", t.elapsed().as_secs_f64()));
     if let Some(truth) = &opts.truth {
         summary.scores = Some(score_against_truth(&opts.output, truth, &grid)?);
+    }
+    let views = [
+        (opts.left.as_path(), &pair.rpc_left),
+        (opts.right.as_path(), &pair.rpc_right),
+    ];
+    let filled = crate::dsm::filled_path(&opts.output);
+    summary.products = crate::finished::write_products(
+        &opts.products,
+        &opts.output,
+        &grid,
+        &views,
+        (&filled, products::MeasuredFrom::Filled),
+        progress,
+    )?;
+    if let Some(p) = &summary.products {
+        summary.seconds.push(("products", p.seconds));
     }
     Ok(summary)
 }

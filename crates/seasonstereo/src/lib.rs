@@ -49,7 +49,7 @@ use std::path::Path;
 
 pub use anyhow::{Error, Result};
 pub use camera::rectify::Roi;
-pub use camera::{read_dsm, DsmGrid, DsmRaster, Gridding, RpcModel, UtmZone};
+pub use camera::{read_dsm, Crs, DsmGrid, DsmRaster, Gridding, RpcModel, UtmZone};
 pub use dataset::Shard;
 pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
@@ -74,6 +74,7 @@ pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary, ScenePla
 pub use pipeline::rectify::{RectifyOptions, RectifySummary};
 pub use pipeline::score::truth_zone;
 pub use pipeline::{flags, Progress, Silent};
+pub use products::{OrthoBlend, Products, ProductsWritten};
 pub use raster::Image;
 
 pub mod stages;

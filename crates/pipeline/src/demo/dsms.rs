@@ -9,7 +9,6 @@ use camera::{RpcModel, UtmZone};
 use raster::formats::{read_homographies, write_png, PngDepth};
 use raster::{colormap, Homography, Image};
 
-use super::figures::dsm_picture;
 use super::summary::DsmResult;
 use crate::eval::align;
 use crate::eval::layout::{AoiRule, TruthFiles};
@@ -17,6 +16,7 @@ use crate::eval::metrics::{class_code, score_dsm, DsmScores};
 use crate::eval::protocol::Protocol;
 use crate::eval::{predicted_dsm, Truth};
 use crate::pairs::PairPaths;
+use products::dsm_picture;
 
 /// DFC2019 classes of the truth DSM's `_CLS.tif` (as [`crate::world_io::dfc_class`] writes them).
 pub const DFC_CLASSES: [(u8, &str); 4] =

@@ -117,6 +117,9 @@ pub struct ReconstructManyOptions {
     /// Cameras that all carry the scene's altitudes (curated JSONs) are used as given
     /// ([`super::pointing::needs_adjustment`]).
     pub adjust_pointing: bool,
+    /// The products written beside the fused DSM (orthoimage from every view, point cloud,
+    /// quicklook); none by default.
+    pub products: products::Products,
 }
 
 /// Default number of pairs.
@@ -177,6 +180,7 @@ impl ReconstructManyOptions {
             shard: Shard::ALL,
             overwrite: false,
             adjust_pointing: true,
+            products: Default::default(),
         }
     }
 
@@ -275,6 +279,8 @@ pub struct ReconstructManySummary {
     pub report: Option<PathBuf>,
     /// `i/n` of a sharded run (its tiles only); `None` for the run that fuses.
     pub shard: Option<String>,
+    /// The products written beside the fused DSM, when asked for.
+    pub products: Option<products::ProductsWritten>,
     pub seconds: f64,
 }
 
@@ -344,6 +350,21 @@ pub fn reconstruct_many(
         return Ok(summary);
     }
     fuse_pairs(opts, &mut summary, &grids.fused, rows, progress)?;
+    if summary.fused.is_some() {
+        let views: Vec<_> = summary
+            .views
+            .iter()
+            .map(|v| (v.image.as_path(), &v.rpc))
+            .collect();
+        summary.products = crate::finished::write_products(
+            &opts.products,
+            &opts.output,
+            &grids.fused,
+            &views,
+            (&opts.sibling("_count.tif"), products::MeasuredFrom::Count),
+            progress,
+        )?;
+    }
     summary.seconds = start.elapsed().as_secs_f64();
     if summary.fused.is_some() {
         let report = opts.sibling("_report.json");
@@ -427,6 +448,7 @@ fn plan(
         work,
         report: None,
         shard: None,
+        products: None,
         seconds: 0.0,
     };
     Ok((summary, Grids { fused, pairs }))
@@ -1063,6 +1085,7 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
         check_output_file("-o", out, &inputs, true)?;
     }
     crate::outputs::check_dsm_extension("-o", &opts.output)?;
+    crate::outputs::check_products(&opts.products, &opts.output, &inputs, &mut outputs)?;
     check_output_folder("--work", &opts.work_dir(), &inputs, false)?;
     let canon = |p: &Path| std::fs::canonicalize(p).ok();
     if let (Some(t), GridChoice::Like(l)) = (&opts.truth, &opts.grid) {

@@ -87,6 +87,9 @@ pub struct ReconstructOptions {
     /// used as given. `reconstruct-many` turns it off for its pairs, whose cameras it has
     /// adjusted all together.
     pub adjust_pointing: bool,
+    /// The products written beside the DSM (orthoimage, point cloud, quicklook); none by
+    /// default.
+    pub products: products::Products,
 }
 
 impl ReconstructOptions {
@@ -128,6 +131,7 @@ impl ReconstructOptions {
             both_views: true,
             level_ground: true,
             adjust_pointing: true,
+            products: Default::default(),
         }
     }
 
@@ -181,6 +185,7 @@ impl ReconstructOptions {
             crate::outputs::check_output_file(flag, out, &inputs, true)?;
         }
         crate::outputs::check_dsm_extension("-o", &self.output)?;
+        crate::outputs::check_products(&self.products, &self.output, &inputs, &mut outputs)?;
         let run = crate::provenance::RunRecord::of_reconstruct(self);
         crate::provenance::check(&self.work(), &run, &outputs, &inputs, overwrite)
     }

@@ -1,0 +1,137 @@
+//! The coloured point cloud of a DSM: one point per cell with a height (and, when the caller says
+//! so, only the cells that were measured rather than filled), at the cell's centre in the grid's
+//! CRS, coloured by the orthoimage. LAS/LAZ for GIS and lidar tools, PLY for mesh tools (s2p's
+//! layout).
+
+mod las_file;
+mod ply_file;
+
+use std::path::Path;
+
+use camera::DsmGrid;
+use raster::Image;
+
+use crate::{ProductsError, Result};
+
+/// The extensions [`write_point_cloud`] understands.
+pub const POINT_CLOUD_EXTENSIONS: &[&str] = &["las", "laz", "ply"];
+
+/// One point of the cloud: the centre of a cell, its height and its colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct CloudPoint {
+    x: f64,
+    y: f64,
+    z: f64,
+    rgb: Option<[u8; 3]>,
+}
+
+/// The cells that become points, in row order.
+struct Cells<'a> {
+    dsm: &'a Image,
+    grid: &'a DsmGrid,
+    colours: Option<&'a Image>,
+    keep: Option<&'a [bool]>,
+}
+
+impl Cells<'_> {
+    fn iter(&self) -> impl Iterator<Item = CloudPoint> + '_ {
+        let w = self.grid.width;
+        self.dsm
+            .data()
+            .iter()
+            .enumerate()
+            .filter(|&(i, z)| z.is_finite() && self.keep.is_none_or(|k| k[i]))
+            .map(move |(i, &z)| {
+                let (x, y) = self.grid.cell_centre(i % w, i / w);
+                let rgb = self.colours.map(|c| {
+                    let px = &c.data()[i * 3..i * 3 + 3];
+                    [px[0], px[1], px[2]].map(|v| v.round().clamp(0.0, 255.0) as u8)
+                });
+                CloudPoint {
+                    x,
+                    y,
+                    z: z as f64,
+                    rgb,
+                }
+            })
+    }
+
+    fn count(&self) -> usize {
+        self.dsm
+            .data()
+            .iter()
+            .enumerate()
+            .filter(|&(i, z)| z.is_finite() && self.keep.is_none_or(|k| k[i]))
+            .count()
+    }
+}
+
+/// Writes the point cloud of `dsm` (lying on `grid`) at `path`, atomically; returns the number of
+/// points. One point per cell with a finite height and `keep[cell]` true (when given, row-major,
+/// one flag per cell): x, y the cell's centre in the grid's CRS, z its height; RGB from `colours`
+/// (a 3-channel image on the grid, 0–255) when given. The extension picks the format: `.las`
+/// (LAS 1.2, point format 2 with colours, 0 without), `.laz` (the same, compressed) or `.ply`
+/// (binary little-endian, x y z double, red green blue uchar). LAS files carry the grid's EPSG
+/// code as GeoTIFF keys.
+pub fn write_point_cloud(
+    path: &Path,
+    dsm: &Image,
+    grid: &DsmGrid,
+    colours: Option<&Image>,
+    keep: Option<&[bool]>,
+) -> Result<usize> {
+    check_inputs(path, dsm, grid, colours, keep)?;
+    let cells = Cells {
+        dsm,
+        grid,
+        colours,
+        keep,
+    };
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    match ext.as_str() {
+        "las" | "laz" => las_file::write(path, grid, &cells, ext == "laz"),
+        "ply" => ply_file::write(path, grid, &cells),
+        _ => Err(ProductsError::point_cloud(
+            path,
+            format!(
+                "unsupported point cloud extension {ext:?} (supported: {})",
+                POINT_CLOUD_EXTENSIONS.join(", ")
+            ),
+        )),
+    }
+}
+
+/// Sizes and channels of the inputs, checked against the grid.
+fn check_inputs(
+    path: &Path,
+    dsm: &Image,
+    grid: &DsmGrid,
+    colours: Option<&Image>,
+    keep: Option<&[bool]>,
+) -> Result<()> {
+    let size = (grid.width, grid.height);
+    let mismatch = |what: &str, got: String| {
+        Err(ProductsError::Input(format!(
+            "{}: the {what} is {got} but the grid is {}x{}",
+            path.display(),
+            grid.width,
+            grid.height
+        )))
+    };
+    if dsm.size() != size || dsm.channels() != 1 {
+        let (w, h, c) = (dsm.width(), dsm.height(), dsm.channels());
+        return mismatch("DSM", format!("{w}x{h}x{c}"));
+    }
+    if let Some(c) = colours.filter(|c| c.size() != size || c.channels() != 3) {
+        let (w, h, ch) = (c.width(), c.height(), c.channels());
+        return mismatch("colour image (RGB expected)", format!("{w}x{h}x{ch}"));
+    }
+    if let Some(k) = keep.filter(|k| k.len() != size.0 * size.1) {
+        return mismatch("keep mask", format!("{} flags", k.len()));
+    }
+    Ok(())
+}
