@@ -262,9 +262,10 @@ def reconstruct(left: PathLike, right: PathLike, *, out: PathLike,
     ``no_pointing_correction``, ``threads`` (this call's
     worker threads; default every core), the products beside the DSM (``ortho``: a true
     orthoimage GeoTIFF on its grid; ``ortho_blend``: ``"nadir"`` or ``"median"``; ``points``: a
-    ``.las``/``.laz``/``.ply`` point cloud of the measured cells; ``preview``: a PNG quicklook)
-    and the matcher's options of :func:`predict`. Heights are above the WGS84 ellipsoid; ``epsg``
-    takes any projected or geographic code (e.g. 4326, 3857). Without
+    ``.las``/``.laz``/``.ply`` point cloud of the measured cells; ``preview``: a PNG quicklook),
+    ``heights`` (``"ellipsoid"``, the default: above the WGS84 ellipsoid; ``"egm96"``: above the
+    EGM96 geoid) and the matcher's options of :func:`predict`. ``epsg`` takes any projected or
+    geographic code (e.g. 4326, 3857). Without
     ``rpc_left``/``rpc_right`` each image's camera is found beside it as the command finds it (a
     vendor ``.RPB``, ``_RPC.TXT``, DIMAP ``RPC_*.XML``, else the TIFF's RPC tag), so a vendor
     delivery needs no camera argument. Returns the tiles (``failed`` ones included: the DSM holds the others),
@@ -305,7 +306,7 @@ def reconstruct_many(images: "Union[PathLike, Iterable[PathLike]]", rpc_dir: Opt
     ``truth``,
     ``alt_range``, ``gridding``, ``tile``, ``collar``, ``max_memory`` (GiB), ``threads`` (this
     call's worker threads; default every core), the products ``ortho`` (from every image),
-    ``ortho_blend``, ``points``, ``preview`` (as :func:`reconstruct`) and the matcher's options
+    ``ortho_blend``, ``points``, ``preview``, ``heights`` (as :func:`reconstruct`) and the matcher's options
     of :func:`predict`.
 
     Returns the report's content: ``views``, ``pointing`` (each image's correction and

@@ -120,8 +120,10 @@ impl<'py> Keywords<'py> {
         Ok(())
     }
 
-    /// `ortho`, `ortho_blend` ("nadir" or "median"), `points`, `preview`: the products written
-    /// beside the DSM, as the command line's `--ortho`, `--ortho-blend`, `--points`, `--preview`.
+    /// `ortho`, `ortho_blend` ("nadir" or "median"), `points`, `preview`, `heights`
+    /// ("ellipsoid" or "egm96"): the products written beside the DSM and its vertical
+    /// reference, as the command line's `--ortho`, `--ortho-blend`, `--points`, `--preview`,
+    /// `--heights`.
     pub fn products(&self) -> PyResult<seasonstereo::Products> {
         let mut products = seasonstereo::Products {
             ortho: self.path("ortho")?,
@@ -131,6 +133,9 @@ impl<'py> Keywords<'py> {
         };
         if let Some(blend) = self.take::<String>("ortho_blend")? {
             products.ortho_blend = flags::ortho_blend(&blend).map_err(exception)?;
+        }
+        if let Some(heights) = self.take::<String>("heights")? {
+            products.heights = flags::heights(&heights).map_err(exception)?;
         }
         Ok(products)
     }

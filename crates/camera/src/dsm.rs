@@ -614,9 +614,19 @@ pub fn median_filter(dsm: &Image, window: usize) -> Image {
     Image::new(w, h, 1, out).expect("same size as the input")
 }
 
-/// Writes a DSM as a float32 Cloud-Optimized GeoTIFF on `grid` (georeference, EPSG, nodata NaN,
-/// 256² tiles, overviews), atomically.
+/// Writes a DSM of ellipsoidal heights as a float32 Cloud-Optimized GeoTIFF on `grid`
+/// (georeference, EPSG, nodata NaN, 256² tiles, overviews), atomically.
 pub fn write_dsm(path: impl AsRef<Path>, image: &Image, grid: &DsmGrid) -> Result<()> {
+    write_dsm_heights(path, image, grid, crate::Heights::Ellipsoid)
+}
+
+/// [`write_dsm`] for heights above `heights`' reference, which the file's metadata names.
+pub fn write_dsm_heights(
+    path: impl AsRef<Path>,
+    image: &Image,
+    grid: &DsmGrid,
+    heights: crate::Heights,
+) -> Result<()> {
     let path = path.as_ref();
     if image.size() != (grid.width, grid.height) || image.channels() != 1 {
         return Err(CameraError::Input(format!(
@@ -629,7 +639,7 @@ pub fn write_dsm(path: impl AsRef<Path>, image: &Image, grid: &DsmGrid) -> Resul
             grid.height
         )));
     }
-    raster::formats::write_cog(path, image, &dsm_meta(grid))?;
+    raster::formats::write_cog(path, image, &dsm_meta(grid, heights))?;
     Ok(())
 }
 
@@ -640,28 +650,16 @@ pub fn dsm_writer(path: impl AsRef<Path>, grid: &DsmGrid) -> Result<raster::form
     Ok(raster::formats::CogWriter::new(
         path,
         size,
-        &dsm_meta(grid),
+        &dsm_meta(grid, crate::Heights::Ellipsoid),
     )?)
 }
 
 /// The tags of a DSM on `grid`: its georeference, NaN as nodata, and what its heights are.
-fn dsm_meta(grid: &DsmGrid) -> GeoTiffMeta {
+fn dsm_meta(grid: &DsmGrid, heights: crate::Heights) -> GeoTiffMeta {
     GeoTiffMeta {
         georef: Some(grid.georeference()),
         nodata: Some(f64::NAN),
         rpc: None,
-        gdal_metadata: Some(HEIGHTS_METADATA.to_string()),
+        gdal_metadata: Some(heights.gdal_metadata()),
     }
 }
-
-/// What a DSM's heights are, in GDAL's metadata: `gdalinfo` and QGIS show the band's
-/// description and unit, and the vertical reference as a dataset item. The heights are
-/// ellipsoidal (WGS84, EPSG:4979's vertical axis), as the RPC cameras give them: not above the
-/// geoid or mean sea level (EGM96/EGM2008), which differ by tens of metres.
-pub const HEIGHTS_METADATA: &str = "<GDALMetadata>\n  \
-     <Item name=\"VERTICAL_REFERENCE\">ellipsoidal heights, WGS84 (EPSG:4979)</Item>\n  \
-     <Item name=\"VERTICAL_UNIT\">metre</Item>\n  \
-     <Item name=\"DESCRIPTION\" sample=\"0\" role=\"description\">height above the WGS84 \
-     ellipsoid</Item>\n  \
-     <Item name=\"UNITTYPE\" sample=\"0\" role=\"unittype\">metre</Item>\n\
-     </GDALMetadata>";

@@ -11,6 +11,7 @@ mod error;
 pub mod adjust;
 pub mod crs;
 pub mod dsm;
+pub mod geoid;
 pub mod rectify;
 pub mod rpc;
 pub mod triangulate;
@@ -23,10 +24,11 @@ pub use adjust::{
 pub use crs::Crs;
 pub use dsm::{
     dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window,
-    rasterize_window_with, read_dsm, resample_nearest, write_dsm, DsmGrid, DsmRaster, GridWindow,
-    Gridding, HoleFill,
+    rasterize_window_with, read_dsm, resample_nearest, write_dsm, write_dsm_heights, DsmGrid,
+    DsmRaster, GridWindow, Gridding, HoleFill,
 };
 pub use error::CameraError;
+pub use geoid::{egm96_undulation, to_egm96, Heights};
 pub use rpc::RpcModel;
 pub use triangulate::{altitude, evaluation_mask, triangulate_disparity, Points};
 pub use utm::UtmZone;

@@ -420,6 +420,21 @@ pub struct ProductArgs {
     /// (transparent where no height), at most 2048 pixels a side.
     #[arg(long, value_name = "FILE.png")]
     pub preview: Option<PathBuf>,
+    /// Vertical reference of the DSM's heights: `ellipsoid` (WGS84, as the cameras give them)
+    /// or `egm96` (above the EGM96 geoid, ≈ mean sea level; computed from its degree-360
+    /// coefficients, nothing to download). --truth scores the ellipsoidal heights (the truth's),
+    /// before the conversion. The GeoTIFF's metadata says which.
+    #[arg(long, value_enum, default_value_t = HeightsArg::Ellipsoid)]
+    pub heights: HeightsArg,
+}
+
+/// The vertical reference of a DSM's heights.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum HeightsArg {
+    /// Above the WGS84 ellipsoid (EPSG:4979).
+    Ellipsoid,
+    /// Above the EGM96 geoid (EPSG:5773).
+    Egm96,
 }
 
 impl ProductArgs {
@@ -433,11 +448,16 @@ impl ProductArgs {
             },
             points: self.points.clone(),
             preview: self.preview.clone(),
+            heights: match self.heights {
+                HeightsArg::Ellipsoid => seasonstereo::Heights::Ellipsoid,
+                HeightsArg::Egm96 => seasonstereo::Heights::Egm96,
+            },
         }
     }
 }
 
-/// What the log says of the products written: `wrote o.tif, p.las (1234 points) in 1.2 s`.
+/// What the log says of the products written: `wrote o.tif, p.las (1234 points) in 1.2 s`,
+/// after the geoid conversion when asked.
 pub fn products_line(
     products: &seasonstereo::Products,
     written: &seasonstereo::ProductsWritten,
@@ -450,5 +470,12 @@ pub fn products_line(
             _ => p.display().to_string(),
         })
         .collect();
-    format!("wrote {} in {:.1} s", names.join(", "), written.seconds)
+    let mut done = Vec::new();
+    if products.heights == seasonstereo::Heights::Egm96 {
+        done.push("converted the DSM's heights to the EGM96 geoid".to_string());
+    }
+    if !names.is_empty() {
+        done.push(format!("wrote {}", names.join(", ")));
+    }
+    format!("{} in {:.1} s", done.join("; "), written.seconds)
 }

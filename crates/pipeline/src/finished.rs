@@ -1,10 +1,11 @@
-//! What is made from a finished DSM beside it: the products a run asks for (orthoimage, point
-//! cloud, quicklook: the `products` crate), written once the DSM is, and said in the log.
+//! What is made from a finished DSM: its heights converted to the geoid when asked, and the
+//! products a run asks for beside it (orthoimage, point cloud, quicklook: the `products`
+//! crate), written once the DSM is, and said in the log.
 
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use camera::{DsmGrid, RpcModel};
+use camera::{DsmGrid, Heights, RpcModel};
 use products::{MeasuredFrom, OrthoView, Products, ProductsWritten};
 
 use crate::progress::Progress;
@@ -20,19 +21,27 @@ pub fn write_products(
     measured: (&Path, MeasuredFrom),
     progress: &dyn Progress,
 ) -> Result<Option<ProductsWritten>> {
-    if products.paths().is_empty() {
+    if products.is_empty() {
         return Ok(None);
+    }
+    if products.heights == Heights::Egm96 {
+        progress.note(&format!(
+            "converting {} to heights above the EGM96 geoid",
+            dsm.display()
+        ));
     }
     let names: Vec<String> = products
         .paths()
         .iter()
         .map(|p| p.display().to_string())
         .collect();
-    progress.note(&format!(
-        "writing {} from the DSM and {} views",
-        names.join(", "),
-        views.len()
-    ));
+    if !names.is_empty() {
+        progress.note(&format!(
+            "writing {} from the DSM and {} views",
+            names.join(", "),
+            views.len()
+        ));
+    }
     let views: Vec<OrthoView> = views
         .iter()
         .map(|(image, rpc)| OrthoView {

@@ -192,6 +192,15 @@ pub fn gridding(name: &str) -> Result<camera::Gridding> {
     }
 }
 
+/// `--heights`: `ellipsoid` or `egm96`.
+pub fn heights(name: &str) -> Result<camera::Heights> {
+    match name.trim().to_ascii_lowercase().as_str() {
+        "ellipsoid" => Ok(camera::Heights::Ellipsoid),
+        "egm96" | "geoid" => Ok(camera::Heights::Egm96),
+        _ => bail!("unknown heights {name:?}: expected ellipsoid or egm96"),
+    }
+}
+
 /// `--ortho-blend`: `nadir` or `median`.
 pub fn ortho_blend(name: &str) -> Result<products::OrthoBlend> {
     match name.trim().to_ascii_lowercase().as_str() {

@@ -1,11 +1,12 @@
 //! The products beside a DSM on the real dev images, as delivered (DFC2019 JAX_068 `vendor/`:
 //! TIFF + `.RPB` + `.IMD`, read in place): the orthoimage lies on exactly the DSM's grid and its
 //! edges on the DSM's building edges, the point cloud holds the measured cells in the DSM's CRS
-//! with colours, and a DSM in another CRS scores as the UTM one does.
+//! with colours, a DSM in another CRS scores as the UTM one does, and heights above the geoid
+//! are the ellipsoidal ones lifted by EGM96.
 
 use std::path::{Path, PathBuf};
 
-use camera::{read_dsm, DsmGrid, UtmZone};
+use camera::{read_dsm, DsmGrid, Heights, UtmZone};
 use matching::SgmParams;
 use pipeline::dsm::GridChoice;
 use pipeline::matcher::Matcher;
@@ -171,17 +172,28 @@ fn the_orthoimage_sits_on_the_dsm_and_the_point_cloud_holds_its_measured_cells()
     assert_eq!(&png[1..4], b"PNG");
 }
 
+/// The DSM of one pair (006-020 as delivered) on the grid of `epsg`, with `heights`.
+fn pair_dsm(epsg: Option<u32>, heights: Heights, output: &Path) {
+    let opts = ReconstructOptions {
+        products: Products {
+            heights,
+            ..Default::default()
+        },
+        ..ReconstructOptions::new(
+            delivered("006"),
+            delivered("020"),
+            Matcher::Classical(SgmParams::default()),
+            resolution_grid(epsg),
+            output.to_path_buf(),
+        )
+    };
+    reconstruct(&opts, &Silent).unwrap();
+}
+
 /// The DSM of one pair scored against the truth, on the grid of `epsg`.
 fn pair_mae(epsg: Option<u32>, dir: &Path) -> (f64, f64, u32) {
     let output = dir.join(format!("{}.tif", epsg.unwrap_or(0)));
-    let opts = ReconstructOptions::new(
-        delivered("006"),
-        delivered("020"),
-        Matcher::Classical(SgmParams::default()),
-        resolution_grid(epsg),
-        output.clone(),
-    );
-    reconstruct(&opts, &Silent).unwrap();
+    pair_dsm(epsg, Heights::Ellipsoid, &output);
     let truth = pipeline::score::read_truth(
         &jax("truth/JAX_068_DSM.tif"),
         UtmZone::new(17, true).unwrap(),
@@ -205,4 +217,32 @@ fn a_dsm_in_geographic_or_web_mercator_coordinates_scores_as_the_utm_one() {
         assert!((other.0 - utm.0).abs() < 0.02, "{other:?} against {utm:?}");
         assert!((other.1 - utm.1).abs() < 0.01, "{other:?} against {utm:?}");
     }
+
+    // Heights above the EGM96 geoid: the same DSM lifted by the geoid's undulation (about 29 m
+    // here), and the file says so.
+    let geoid = dir.path().join("egm96.tif");
+    pair_dsm(None, Heights::Egm96, &geoid);
+    let (a, b) = (
+        read_dsm(dir.path().join("0.tif"), None).unwrap(),
+        read_dsm(&geoid, None).unwrap(),
+    );
+    assert_eq!(a.grid, b.grid);
+    let (x, y) = a.grid.cell_centre(a.grid.width / 2, a.grid.height / 2);
+    let (lon, lat) = a.grid.crs().inverse(x, y);
+    let n = camera::egm96_undulation(lon, lat);
+    assert!((-31.0..-27.0).contains(&n), "{n}");
+    for (e, g) in a.image.data().iter().zip(b.image.data()) {
+        assert_eq!(e.is_finite(), g.is_finite());
+        if e.is_finite() {
+            assert!(((e - g) as f64 - n).abs() < 0.05, "{e} {g} {n}");
+        }
+    }
+    let metadata = raster::formats::TiffReader::open(&geoid)
+        .unwrap()
+        .gdal_metadata
+        .unwrap();
+    assert!(
+        metadata.contains("EGM96 geoid heights (EPSG:5773)"),
+        "{metadata}"
+    );
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use camera::{read_dsm, DsmGrid};
+use camera::{read_dsm, write_dsm_heights, DsmGrid, Heights};
 use raster::Image;
 
 use crate::points::POINT_CLOUD_EXTENSIONS;
@@ -24,6 +24,9 @@ pub struct Products {
     pub points: Option<PathBuf>,
     /// A quicklook PNG of the DSM (heights in colour over a hillshade).
     pub preview: Option<PathBuf>,
+    /// The DSM's vertical reference: the cameras' ellipsoidal heights as they are, or converted
+    /// to heights above the EGM96 geoid (the DSM rewritten, the products made from it).
+    pub heights: Heights,
 }
 
 /// What [`Products::write`] wrote.
@@ -74,10 +77,17 @@ impl Products {
         Ok(())
     }
 
-    /// Writes the products of the DSM at `dsm` (a GeoTIFF, as `reconstruct` writes it) seen by
-    /// `views` (their cameras as the reconstruction used them, pointing corrected). The point
-    /// cloud keeps the cells `measured` says were triangulated (row-major, one flag per cell;
-    /// every cell with a height when `None`), coloured from the orthoimage when one is made.
+    /// Whether anything is asked for beyond the ellipsoidal DSM.
+    pub fn is_empty(&self) -> bool {
+        self.paths().is_empty() && self.heights == Heights::Ellipsoid
+    }
+
+    /// Writes the products of the DSM at `dsm` (a GeoTIFF of ellipsoidal heights, as
+    /// `reconstruct` writes it) seen by `views` (their cameras as the reconstruction used them,
+    /// pointing corrected), after converting the DSM's heights to [`Products::heights`]. The
+    /// point cloud keeps the cells `measured` says were triangulated (row-major, one flag per
+    /// cell; every cell with a height when `None`), coloured from the orthoimage when one is
+    /// made.
     pub fn write(
         &self,
         dsm: &Path,
@@ -85,10 +95,14 @@ impl Products {
         measured: Option<&[bool]>,
     ) -> Result<ProductsWritten> {
         let start = Instant::now();
-        if self.paths().is_empty() {
+        if self.is_empty() {
             return Ok(ProductsWritten::default());
         }
-        let raster = read_dsm(dsm, None)?;
+        let mut raster = read_dsm(dsm, None)?;
+        if self.heights == Heights::Egm96 {
+            camera::to_egm96(&mut raster.image, &raster.grid);
+            write_dsm_heights(dsm, &raster.image, &raster.grid, self.heights)?;
+        }
         let (heights, grid) = (&raster.image, &raster.grid);
         let colours = match (&self.ortho, &self.points) {
             (None, None) => None,

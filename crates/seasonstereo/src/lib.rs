@@ -49,7 +49,7 @@ use std::path::Path;
 
 pub use anyhow::{Error, Result};
 pub use camera::rectify::Roi;
-pub use camera::{read_dsm, Crs, DsmGrid, DsmRaster, Gridding, RpcModel, UtmZone};
+pub use camera::{read_dsm, Crs, DsmGrid, DsmRaster, Gridding, Heights, RpcModel, UtmZone};
 pub use dataset::Shard;
 pub use matching::SgmParams;
 pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
