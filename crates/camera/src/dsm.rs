@@ -184,6 +184,22 @@ impl DsmGrid {
         })
     }
 
+    /// Refuses a DSM image that is not one channel of the grid's size, naming `origin` (the
+    /// file it is for).
+    pub fn check_heights(&self, image: &Image, origin: &str) -> Result<()> {
+        if image.size() == (self.width, self.height) && image.channels() == 1 {
+            return Ok(());
+        }
+        Err(CameraError::Input(format!(
+            "{origin}: the DSM is {}x{}x{} but its grid is {}x{}",
+            image.width(),
+            image.height(),
+            image.channels(),
+            self.width,
+            self.height
+        )))
+    }
+
     /// The grid's map projection.
     pub fn crs(&self) -> &'static Crs {
         Crs::from_epsg(self.epsg).expect("checked at construction")
@@ -628,17 +644,7 @@ pub fn write_dsm_heights(
     heights: crate::Heights,
 ) -> Result<()> {
     let path = path.as_ref();
-    if image.size() != (grid.width, grid.height) || image.channels() != 1 {
-        return Err(CameraError::Input(format!(
-            "{}: DSM image is {}x{}x{} but the grid is {}x{}",
-            path.display(),
-            image.width(),
-            image.height(),
-            image.channels(),
-            grid.width,
-            grid.height
-        )));
-    }
+    grid.check_heights(image, &path.display().to_string())?;
     raster::formats::write_cog(path, image, &dsm_meta(grid, heights))?;
     Ok(())
 }

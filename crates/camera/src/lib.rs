@@ -12,6 +12,7 @@ pub mod adjust;
 pub mod crs;
 pub mod dsm;
 pub mod geoid;
+pub mod heights;
 pub mod rectify;
 pub mod rpc;
 pub mod triangulate;
@@ -28,7 +29,8 @@ pub use dsm::{
     DsmRaster, GridWindow, Gridding, HoleFill,
 };
 pub use error::CameraError;
-pub use geoid::{egm96_undulation, to_egm96, Heights};
+pub use geoid::{egm96_undulation, to_egm96};
+pub use heights::Heights;
 pub use rpc::RpcModel;
 pub use triangulate::{altitude, evaluation_mask, triangulate_disparity, Points};
 pub use utm::UtmZone;

@@ -156,7 +156,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Train(a) => train::run(a),
         Command::Demo(a) => demo::run(a, &progress),
         Command::Eval(a) => eval::run(a, &progress),
-        Command::Jobs(a) => jobs::run(a),
+        Command::Jobs(a) => jobs::run(a, |argv| Cli::try_parse_from(argv).map(|_| ())),
     }
 }
 

@@ -13,6 +13,7 @@ mod figures;
 mod format;
 mod laps;
 mod many_dates;
+mod options;
 mod report;
 mod summary;
 
@@ -35,8 +36,9 @@ use report::{write_report, ReportContext};
 pub use figures::thumbnail;
 pub use format::{matcher_flags, metres, percent, pixels};
 pub use many_dates::{ChosenPair, ManyDatesResult, MANY_DATES_SIZE};
+pub use options::DemoOptions;
 pub use products::{dsm_picture, hillshade};
-pub use summary::{DemoOptions, DemoSummary, DsmResult, PairResult};
+pub use summary::{DemoSummary, DsmResult, PairResult};
 
 /// The `season` variant of one view of a world (image id `id`) by the built-in appearance model,
 /// the view's exact classes as hints: colours change, geometry does not, so the true disparity

@@ -13,6 +13,7 @@ use raster::{Image, Mask};
 
 use crate::eval::aggregate::median;
 use crate::eval::align::{align, apply, AlignParams};
+use crate::outputs::{check_dsm_extension, check_output_file};
 
 /// Where the DSM cells are.
 #[derive(Clone, Debug)]
@@ -72,7 +73,7 @@ impl DsmOptions {
             &self.rpc_right,
         ];
         let inputs = inputs.map(|p| p.as_path());
-        crate::outputs::check_dsm_output("-o", &self.output, &inputs, overwrite)
+        check_dsm_output("-o", &self.output, &inputs, overwrite)
     }
 }
 
@@ -400,6 +401,24 @@ fn compare_with(
         dy: a.dy,
         offset: a.offset,
     })
+}
+
+/// The checks of a DSM output with its sidecars ([`sidecars`]): a GeoTIFF path, none
+/// of them an input, none existing unless `overwrite`.
+fn check_dsm_output(flag: &str, output: &Path, inputs: &[&Path], overwrite: bool) -> Result<()> {
+    // An output onto an input is named as such first: the most important refusal.
+    check_output_file(flag, output, inputs, true)?;
+    check_dsm_extension(flag, output)?;
+    check_output_file(flag, output, inputs, overwrite)?;
+    for sidecar in sidecars(output) {
+        check_output_file(
+            &format!("{flag} (its sidecar)"),
+            &sidecar,
+            inputs,
+            overwrite,
+        )?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -138,6 +138,11 @@ pub fn median_cells(cells: usize) -> Option<usize> {
     (cells > 1).then_some(cells)
 }
 
+/// Bytes in GiB, as messages say memory.
+pub fn gib(bytes: u64) -> f64 {
+    bytes as f64 / (1u64 << 30) as f64
+}
+
 /// `--max-memory`: a positive number of GiB, in bytes.
 pub fn memory_bytes(gib: f64) -> Result<u64> {
     if !(gib.is_finite() && gib > 0.0) {

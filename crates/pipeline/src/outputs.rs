@@ -121,11 +121,7 @@ pub const DSM_EXTENSIONS: [&str; 2] = ["tif", "tiff"];
 
 /// Refuses a DSM path whose extension is not one of [`DSM_EXTENSIONS`].
 pub fn check_dsm_extension(flag: &str, output: &Path) -> Result<()> {
-    let ext = output
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    if ext.is_some_and(|e| DSM_EXTENSIONS.contains(&e.as_str())) {
+    if DSM_EXTENSIONS.contains(&raster::formats::extension_of(output).as_str()) {
         return Ok(());
     }
     bail!(
@@ -133,29 +129,6 @@ pub fn check_dsm_extension(flag: &str, output: &Path) -> Result<()> {
         output.display(),
         DSM_EXTENSIONS.join(" or .")
     )
-}
-
-/// The checks of a DSM output with its sidecars ([`crate::dsm::sidecars`]): a GeoTIFF path, none
-/// of them an input, none existing unless `overwrite`.
-pub fn check_dsm_output(
-    flag: &str,
-    output: &Path,
-    inputs: &[&Path],
-    overwrite: bool,
-) -> Result<()> {
-    // An output onto an input is named as such first: the most important refusal.
-    check_output_file(flag, output, inputs, true)?;
-    check_dsm_extension(flag, output)?;
-    check_output_file(flag, output, inputs, overwrite)?;
-    for sidecar in crate::dsm::sidecars(output) {
-        check_output_file(
-            &format!("{flag} (its sidecar)"),
-            &sidecar,
-            inputs,
-            overwrite,
-        )?;
-    }
-    Ok(())
 }
 
 /// Refuses an output (file or folder) that is one of the run's `inputs`, or a folder that holds
@@ -319,13 +292,13 @@ impl std::error::Error for Incomplete {}
 /// the run's provenance checks).
 pub fn check_products(
     products: &products::Products,
-    dsm: &Path,
+    dsm_path: &Path,
     inputs: &[&Path],
     outputs: &mut Vec<PathBuf>,
 ) -> Result<()> {
     products.check()?;
     for path in products.paths() {
-        if resolve(path) == resolve(dsm) {
+        if resolve(path) == resolve(dsm_path) {
             bail!(
                 "{}: a product cannot be written over the DSM (-o): give another file name",
                 path.display()

@@ -17,8 +17,6 @@ use serde_json::{json, Value};
 
 use crate::dsm::GridChoice;
 use crate::outputs::resolve;
-use crate::reconstruct::many::ReconstructManyOptions;
-use crate::reconstruct::ReconstructOptions;
 use crate::stage::{read_json, write_text};
 
 /// The record's name in the work folder.
@@ -83,7 +81,8 @@ pub struct Product {
 }
 
 impl InputFile {
-    fn of(role: &str, path: &Path) -> InputFile {
+    /// The file at `path` as it is now, in the role `role`.
+    pub fn of(role: &str, path: &Path) -> InputFile {
         let read = || -> std::io::Result<(u64, String)> {
             let mut f = std::fs::File::open(path)?;
             let size = f.metadata()?.len();
@@ -113,7 +112,8 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     })
 }
 
-fn grid_json(grid: &GridChoice) -> Value {
+/// The grid as the record keeps it (a `--like` file is an input instead).
+pub fn grid_json(grid: &GridChoice) -> Value {
     match grid {
         // The file itself is an input.
         GridChoice::Like(_) => json!("like"),
@@ -126,7 +126,8 @@ fn grid_json(grid: &GridChoice) -> Value {
     }
 }
 
-fn grid_input(grid: &GridChoice) -> Option<&Path> {
+/// The file a grid is taken from, an input of the run.
+pub fn grid_input(grid: &GridChoice) -> Option<&Path> {
     match grid {
         GridChoice::Like(p) => Some(p.as_path()),
         GridChoice::Resolution { .. } | GridChoice::Exact(_) => None,
@@ -134,101 +135,13 @@ fn grid_input(grid: &GridChoice) -> Option<&Path> {
 }
 
 /// The vendor files found beside an image (its camera, its metadata): inputs too.
-fn sidecars(image: &Path) -> impl Iterator<Item = InputFile> {
+pub fn delivery_files(image: &Path) -> impl Iterator<Item = InputFile> {
     let camera = camera::find_camera_file(image).map(|p| InputFile::of("camera_sidecar", &p));
     let metadata = camera::find_metadata_file(image).map(|p| InputFile::of("metadata", &p));
     camera.into_iter().chain(metadata)
 }
 
 impl RunRecord {
-    /// The record of a `reconstruct` run (also each pair of `reconstruct-many`).
-    pub fn of_reconstruct(o: &ReconstructOptions) -> RunRecord {
-        let mut inputs = vec![
-            InputFile::of("left", &o.left),
-            InputFile::of("right", &o.right),
-        ];
-        let optional = [
-            ("rpc_left", o.rpc_left.as_deref()),
-            ("rpc_right", o.rpc_right.as_deref()),
-            ("like", grid_input(&o.grid)),
-            ("truth", o.truth.as_deref()),
-        ];
-        for (role, path) in optional {
-            inputs.extend(path.map(|p| InputFile::of(role, p)));
-        }
-        inputs.extend(sidecars(&o.left).chain(sidecars(&o.right)));
-        RunRecord {
-            command: "reconstruct".into(),
-            inputs,
-            work: json!({
-                "roi": o.roi,
-                "roi_lonlat": o.roi_lonlat,
-                "alt_range": o.alt_range,
-                "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
-                "grid": grid_json(&o.grid),
-                "gridding": format!("{:?}", o.gridding),
-                "border": o.border,
-                "tile": o.tile,
-                "collar": o.collar,
-                "both_views": o.both_views,
-                "level_ground": o.level_ground,
-                "adjust_pointing": o.adjust_pointing,
-            }),
-            product: Product {
-                output: resolve(&o.output),
-                finishing: json!({
-                    "fill_holes": o.fill_holes,
-                    "fill_reach": o.fill_reach,
-                    "median_filter": o.median_filter,
-                }),
-            },
-        }
-    }
-
-    /// The record of a `reconstruct-many` run.
-    pub fn of_many(o: &ReconstructManyOptions) -> RunRecord {
-        let mut inputs: Vec<InputFile> = Vec::new();
-        for image in &o.images {
-            inputs.push(InputFile::of("image", image));
-            let camera = o.rpc_dir.as_ref().and_then(|dir| {
-                let stem = image.file_stem()?;
-                Some(dir.join(format!("{}.json", stem.to_string_lossy())))
-            });
-            inputs.extend(camera.map(|c| InputFile::of("camera", &c)));
-            inputs.extend(sidecars(image));
-        }
-        inputs.extend(grid_input(&o.grid).map(|p| InputFile::of("like", p)));
-        inputs.extend(o.truth.as_deref().map(|p| InputFile::of("truth", p)));
-        RunRecord {
-            command: "reconstruct-many".into(),
-            inputs,
-            work: json!({
-                "grid": grid_json(&o.grid),
-                "pairs": o.pairs,
-                "pair_median_filter": o.pair_median_filter,
-                "both_views": o.both_views,
-                "alt_range": o.alt_range,
-                "adjust_pointing": o.adjust_pointing,
-                "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
-                "gridding": format!("{:?}", o.gridding),
-                "tile": o.tile,
-                "collar": o.collar,
-            }),
-            product: Product {
-                output: resolve(&o.output),
-                finishing: json!({
-                    "cluster_tolerance": o.cluster_tolerance,
-                    "min_support": o.min_support,
-                    "min_confidence": o.min_confidence,
-                    "co_register": o.co_register,
-                    "weight_pairs": o.weight_pairs,
-                    "fill_holes": o.fill_holes,
-                    "median_filter": o.median_filter,
-                }),
-            },
-        }
-    }
-
     /// The record as it reads back from its file (numbers and paths normalized by JSON).
     fn normalized(&self) -> Result<RunRecord> {
         Ok(serde_json::from_value(serde_json::to_value(self)?)?)
@@ -449,32 +362,57 @@ pub fn claim(work: &Path, run: &RunRecord) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::matcher::Matcher;
 
-    fn options(dir: &Path) -> ReconstructOptions {
-        let (l, r) = (dir.join("l.tif"), dir.join("r.tif"));
-        std::fs::write(&l, b"left").unwrap();
-        std::fs::write(&r, b"right").unwrap();
-        ReconstructOptions::new(
-            l,
-            r,
-            Matcher::Classical(Default::default()),
-            GridChoice::Resolution {
-                resolution: 0.5,
-                bounds: None,
-                epsg: None,
-            },
-            dir.join("dsm.tif"),
-        )
+    /// A run on two images of `dir` (written), its DSM `dsm.tif` finished with a median of
+    /// `median` cells, its work folder `dsm_work`.
+    struct Run {
+        right: PathBuf,
+        output: PathBuf,
+        work: PathBuf,
+        camera: Option<PathBuf>,
+        median: usize,
+    }
+
+    impl Run {
+        fn new(dir: &Path) -> Run {
+            let (l, r) = (dir.join("l.tif"), dir.join("r.tif"));
+            std::fs::write(&l, b"left").unwrap();
+            std::fs::write(&r, b"right").unwrap();
+            Run {
+                right: r,
+                output: dir.join("dsm.tif"),
+                work: dir.join("dsm_work"),
+                camera: None,
+                median: 15,
+            }
+        }
+
+        fn record(&self) -> RunRecord {
+            let left = self.right.with_file_name("l.tif");
+            let mut inputs = vec![
+                InputFile::of("left", &left),
+                InputFile::of("right", &self.right),
+            ];
+            inputs.extend(self.camera.as_ref().map(|c| InputFile::of("rpc_left", c)));
+            RunRecord {
+                command: "reconstruct".into(),
+                inputs,
+                work: json!({ "tile": 1024 }),
+                product: Product {
+                    output: resolve(&self.output),
+                    finishing: json!({ "median_filter": self.median }),
+                },
+            }
+        }
     }
 
     #[test]
     fn the_same_run_resumes_and_any_other_is_refused_or_cleared() {
         let dir = tempfile::tempdir().unwrap();
-        let o = options(dir.path());
-        let work = o.work();
+        let o = Run::new(dir.path());
+        let work = o.work.clone();
         let outputs = vec![o.output.clone()];
-        let run = RunRecord::of_reconstruct(&o);
+        let run = o.record();
         check(&work, &run, &outputs, &[], false).unwrap();
         claim(&work, &run).unwrap();
         std::fs::write(work.join("tile"), b"t").unwrap();
@@ -482,11 +420,11 @@ mod tests {
         check(&work, &run, &outputs, &[], false).unwrap();
 
         // Other finishing: the DSM is replaced only with --overwrite, the content kept.
-        let refinished = ReconstructOptions {
-            median_filter: Some(5),
-            ..o.clone()
+        let refinished = Run {
+            median: 5,
+            ..Run::new(dir.path())
         };
-        let run2 = RunRecord::of_reconstruct(&refinished);
+        let run2 = refinished.record();
         let e = check(&work, &run2, &outputs, &[], false).unwrap_err();
         assert!(e.to_string().contains("median_filter"), "{e}");
         check(&work, &run2, &outputs, &[], true).unwrap();
@@ -494,7 +432,7 @@ mod tests {
 
         // Another input: refused naming the DSM, cleared with --overwrite.
         std::fs::write(&o.right, b"other right").unwrap();
-        let run3 = RunRecord::of_reconstruct(&o);
+        let run3 = o.record();
         let e = check(&work, &run3, &outputs, &[], false).unwrap_err();
         assert!(
             e.to_string().contains("dsm.tif already exists") && e.to_string().contains("r.tif"),
@@ -508,19 +446,19 @@ mod tests {
     #[test]
     fn a_folder_without_a_record_is_an_earlier_version_and_inputs_are_never_cleared() {
         let dir = tempfile::tempdir().unwrap();
-        let mut o = options(dir.path());
-        let work = o.work();
+        let mut o = Run::new(dir.path());
+        let work = o.work.clone();
         std::fs::create_dir_all(work.join("jobs")).unwrap();
         std::fs::write(work.join("notes.txt"), b"mine").unwrap();
-        let run = RunRecord::of_reconstruct(&o);
+        let run = o.record();
         check(&work, &run, &[], &[], false).unwrap();
         std::fs::write(work.join("scene.json"), b"{}").unwrap();
         let e = check(&work, &run, &[], &[], false).unwrap_err();
         assert!(e.to_string().contains("earlier version"), "{e}");
         let camera = work.join("camera.json");
         std::fs::write(&camera, b"{}").unwrap();
-        o.rpc_left = Some(camera.clone());
-        let run = RunRecord::of_reconstruct(&o);
+        o.camera = Some(camera.clone());
+        let run = o.record();
         assert!(check(&work, &run, &[], &[&camera], true).is_err());
         assert!(camera.is_file());
         std::fs::remove_file(&camera).unwrap();

@@ -27,6 +27,7 @@ pub mod plan;
 pub mod pointing;
 pub mod raw;
 pub mod sanity;
+pub mod scene;
 pub mod select;
 pub mod tile;
 pub mod workers;
@@ -47,10 +48,11 @@ use crate::progress::Progress;
 use crate::rectify::{altitude_range, camera_of, file_stem, given_altitude_range};
 use crate::stage::write_json;
 use folder::TileFolder;
-use merge::{check_merge_memory, merge_tiles, Finishing, MERGE_BLOCK_ROWS};
+use merge::{check_merge_memory, merge_tiles, MERGE_BLOCK_ROWS};
 use plan::{plan_tiles, Tile};
 use raw::RawImage;
-use tile::{run_tile, tile_memory, tile_rectification, Scene, TileRecord, TileStatus};
+use scene::Scene;
+use tile::{run_tile, tile_memory, tile_rectification, TileRecord, TileStatus};
 use workers::run_on_workers;
 
 pub use options::{default_work_dir, ReconstructOptions};
@@ -251,7 +253,7 @@ fn prepare(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<(OpenPa
     let stem = format!("{}-{}", file_stem(&opts.left)?, file_stem(&opts.right)?);
     let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
     let grid = scene_grid(&opts.grid, &pair.rpc_left, roi, pair.alt_range)?;
-    let merge_memory = merge::merge_memory(&grid, &Finishing::of(opts), MERGE_BLOCK_ROWS);
+    let merge_memory = merge::merge_memory(&grid, &opts.finishing(), MERGE_BLOCK_ROWS);
     check_merge_memory(&grid, merge_memory, opts.max_memory)?;
     let plan = ScenePlan {
         work,
@@ -284,7 +286,7 @@ pub fn reconstruct(
         merge_memory,
         ..
     } = plan;
-    crate::provenance::claim(&work, &crate::provenance::RunRecord::of_reconstruct(opts))?;
+    crate::provenance::claim(&work, &opts.run_record())?;
     claim_work_folder(&work, &scene_settings(opts, roi, alt_range, &grid))?;
     let folder = TileFolder::new(&work);
     let mut seconds = Vec::new();
@@ -349,7 +351,7 @@ pub fn reconstruct(
     }
     let t = Instant::now();
     summary.dsm = Some(merge_tiles(
-        &Finishing::of(opts),
+        &opts.finishing(),
         &grid,
         &folder,
         &summary.records,
@@ -655,9 +657,9 @@ fn check_tile_memory(
             "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
              --max-memory {:.2} GiB: use a smaller --tile (now {} px) or a narrower \
              --alt-range ({})",
-            gib(largest),
-            gib(PROCESS_BYTES),
-            gib(opts.max_memory),
+            crate::flags::gib(largest),
+            crate::flags::gib(PROCESS_BYTES),
+            crate::flags::gib(opts.max_memory),
             opts.tile,
             rects
                 .iter()
@@ -689,10 +691,6 @@ fn tiles_at_once(matcher: &Matcher, max_memory: u64, largest: u64, todo: usize) 
 pub(crate) fn score_against_truth(dsm: &Path, truth: &Path, grid: &DsmGrid) -> Result<DsmScores> {
     let truth = crate::score::read_truth(truth, grid.nearest_zone())?;
     crate::score::score_dsm_file(dsm, &truth)
-}
-
-pub(crate) fn gib(bytes: u64) -> f64 {
-    bytes as f64 / (1u64 << 30) as f64
 }
 
 /// Writes `scene.json`, or checks that the folder's tiles were made with the same settings.

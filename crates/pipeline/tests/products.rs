@@ -172,8 +172,8 @@ fn the_orthoimage_sits_on_the_dsm_and_the_point_cloud_holds_its_measured_cells()
     assert_eq!(&png[1..4], b"PNG");
 }
 
-/// The DSM of one pair (006-020 as delivered) on the grid of `epsg`, with `heights`.
-fn pair_dsm(epsg: Option<u32>, heights: Heights, output: &Path) {
+/// The DSM of one pair (006-020 as delivered) on `grid`, with `heights`.
+fn pair_dsm(grid: GridChoice, heights: Heights, output: &Path) {
     let opts = ReconstructOptions {
         products: Products {
             heights,
@@ -183,7 +183,7 @@ fn pair_dsm(epsg: Option<u32>, heights: Heights, output: &Path) {
             delivered("006"),
             delivered("020"),
             Matcher::Classical(SgmParams::default()),
-            resolution_grid(epsg),
+            grid,
             output.to_path_buf(),
         )
     };
@@ -193,7 +193,7 @@ fn pair_dsm(epsg: Option<u32>, heights: Heights, output: &Path) {
 /// The DSM of one pair scored against the truth, on the grid of `epsg`.
 fn pair_mae(epsg: Option<u32>, dir: &Path) -> (f64, f64, u32) {
     let output = dir.join(format!("{}.tif", epsg.unwrap_or(0)));
-    pair_dsm(epsg, Heights::Ellipsoid, &output);
+    pair_dsm(resolution_grid(epsg), Heights::Ellipsoid, &output);
     let truth = pipeline::score::read_truth(
         &jax("truth/JAX_068_DSM.tif"),
         UtmZone::new(17, true).unwrap(),
@@ -217,11 +217,19 @@ fn a_dsm_in_geographic_or_web_mercator_coordinates_scores_as_the_utm_one() {
         assert!((other.0 - utm.0).abs() < 0.02, "{other:?} against {utm:?}");
         assert!((other.1 - utm.1).abs() < 0.01, "{other:?} against {utm:?}");
     }
+    // `--like` a DSM in longitude/latitude: exactly its grid.
+    let like = dir.path().join("4326.tif");
+    let again = dir.path().join("like-4326.tif");
+    pair_dsm(GridChoice::Like(like.clone()), Heights::Ellipsoid, &again);
+    assert_eq!(
+        read_dsm(&again, None).unwrap().grid,
+        read_dsm(&like, None).unwrap().grid
+    );
 
     // Heights above the EGM96 geoid: the same DSM lifted by the geoid's undulation (about 29 m
     // here), and the file says so.
     let geoid = dir.path().join("egm96.tif");
-    pair_dsm(None, Heights::Egm96, &geoid);
+    pair_dsm(resolution_grid(None), Heights::Egm96, &geoid);
     let (a, b) = (
         read_dsm(dir.path().join("0.tif"), None).unwrap(),
         read_dsm(&geoid, None).unwrap(),

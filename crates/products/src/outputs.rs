@@ -51,12 +51,6 @@ impl Products {
     /// Refuses, before any work, a file name whose extension says another format: the
     /// orthoimage a GeoTIFF, the point cloud LAS/LAZ/PLY, the quicklook a PNG.
     pub fn check(&self) -> Result<()> {
-        let ext = |p: &Path| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .map(str::to_ascii_lowercase)
-                .unwrap_or_default()
-        };
         let rules: [(&Option<PathBuf>, &str, &[&str]); 3] = [
             (&self.ortho, "--ortho", &["tif", "tiff"]),
             (&self.points, "--points", POINT_CLOUD_EXTENSIONS),
@@ -64,7 +58,7 @@ impl Products {
         ];
         for (path, flag, allowed) in rules {
             if let Some(p) = path {
-                if !allowed.contains(&ext(p).as_str()) {
+                if !allowed.contains(&raster::formats::extension_of(p).as_str()) {
                     return Err(ProductsError::Input(format!(
                         "{flag} {}: the file must end in .{} (the format is taken from the \
                          extension)",

@@ -5,9 +5,10 @@ use std::path::Path;
 
 use camera::DsmGrid;
 use raster::formats::{write_png, PngDepth};
+use raster::resize::block_mean_finite;
 use raster::{colormap, Image};
 
-use crate::{ProductsError, Result};
+use crate::Result;
 
 /// Longest side of a quicklook, pixels: larger DSMs are shrunk by a whole factor (the mean of
 /// the finite heights of each block), so a city-wide DSM still gives a picture of a few MB.
@@ -66,19 +67,9 @@ pub fn dsm_picture(dsm: &Image, cell: f64, range: Option<(f32, f32)>) -> Image {
 /// [`dsm_picture`] of the heights, cells without height transparent. A DSM longer than
 /// [`PREVIEW_MAX_SIDE`] is shrunk first.
 pub fn write_preview(path: &Path, dsm: &Image, grid: &DsmGrid) -> Result<()> {
-    if dsm.size() != (grid.width, grid.height) || dsm.channels() != 1 {
-        return Err(ProductsError::Input(format!(
-            "{}: the DSM is {}x{}x{} but its grid is {}x{}",
-            path.display(),
-            dsm.width(),
-            dsm.height(),
-            dsm.channels(),
-            grid.width,
-            grid.height
-        )));
-    }
+    grid.check_heights(dsm, &path.display().to_string())?;
     let factor = dsm.width().max(dsm.height()).div_ceil(PREVIEW_MAX_SIDE);
-    let small = shrink(dsm, factor);
+    let small = block_mean_finite(dsm, factor);
     let picture = dsm_picture(&small, cell_metres(grid) * factor as f64, None);
     let (w, h) = small.size();
     let mut rgba = Vec::with_capacity(w * h * 4);
@@ -100,33 +91,6 @@ fn cell_metres(grid: &DsmGrid) -> f64 {
     } else {
         grid.resolution
     }
-}
-
-/// `dsm` shrunk by a whole `factor`: each cell the mean of the finite heights of its block (NaN
-/// if none).
-fn shrink(dsm: &Image, factor: usize) -> Image {
-    if factor <= 1 {
-        return dsm.clone();
-    }
-    let (w, h) = dsm.size();
-    let (sw, sh) = (w.div_ceil(factor), h.div_ceil(factor));
-    Image::from_fn(sw, sh, |x, y| {
-        let (mut sum, mut n) = (0.0f64, 0usize);
-        for yy in y * factor..((y + 1) * factor).min(h) {
-            for xx in x * factor..((x + 1) * factor).min(w) {
-                let v = dsm.get(xx, yy, 0);
-                if v.is_finite() {
-                    sum += v as f64;
-                    n += 1;
-                }
-            }
-        }
-        if n == 0 {
-            f32::NAN
-        } else {
-            (sum / n as f64) as f32
-        }
-    })
 }
 
 #[cfg(test)]
@@ -155,7 +119,7 @@ mod tests {
     #[test]
     fn shrinking_averages_the_finite_heights() {
         let dsm = Image::new(3, 2, 1, vec![1.0, 3.0, f32::NAN, 5.0, f32::NAN, f32::NAN]).unwrap();
-        let small = shrink(&dsm, 2);
+        let small = block_mean_finite(&dsm, 2);
         assert_eq!(small.size(), (2, 1));
         assert_eq!(small.get(0, 0, 0), 3.0);
         assert!(small.get(1, 0, 0).is_nan());

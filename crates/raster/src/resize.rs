@@ -357,9 +357,45 @@ fn filter_weights<T: FilterFloat>(
     }
 }
 
+/// `image` (one channel) shrunk by a whole `factor`: each cell the mean of the finite values of
+/// its `factor`² block (NaN when none), blocks at the right and bottom edges cut short: a height
+/// pyramid that holes do not darken.
+pub fn block_mean_finite(image: &Image, factor: usize) -> Image {
+    let factor = factor.max(1);
+    let (w, h) = image.size();
+    Image::from_fn(w.div_ceil(factor), h.div_ceil(factor), |x, y| {
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for yy in y * factor..((y + 1) * factor).min(h) {
+            for xx in x * factor..((x + 1) * factor).min(w) {
+                let v = image.get(xx, yy, 0);
+                if v.is_finite() {
+                    sum += v as f64;
+                    n += 1;
+                }
+            }
+        }
+        if n == 0 {
+            f32::NAN
+        } else {
+            (sum / n as f64) as f32
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn block_means_skip_holes_and_cut_the_edges_short() {
+        let image = Image::new(3, 2, 1, vec![1.0, f32::NAN, 5.0, 3.0, f32::NAN, f32::NAN]).unwrap();
+        let half = block_mean_finite(&image, 2);
+        assert_eq!(half.size(), (2, 1));
+        assert_eq!(half.data(), [2.0, 5.0]);
+        let all_holes = Image::filled(2, 2, 1, f32::NAN);
+        assert!(block_mean_finite(&all_holes, 2).get(0, 0, 0).is_nan());
+        assert_eq!(block_mean_finite(&image, 1).data()[..1], [1.0]);
+    }
 
     fn ramp(width: usize, height: usize, channels: usize) -> Image {
         let data = (0..width * height * channels)

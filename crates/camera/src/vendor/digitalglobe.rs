@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use super::{iso_datetime, metadata_error, number, rpc_error, Acquisition, Rpc00b};
+use super::fields::{iso_datetime, metadata_error, number, rpc_error, Acquisition, Rpc00b};
 use crate::{Result, RpcModel};
 
 /// One `key = value` statement and the groups it sits in (outermost first).

@@ -10,9 +10,10 @@
 
 use std::path::Path;
 
+use super::fields::{
+    compact_datetime, iso_datetime, metadata_error, number, rpc_error, Acquisition, Rpc00b,
+};
 use super::xml::{leaves, Leaf};
-use super::{compact_datetime, iso_datetime, metadata_error, number, rpc_error};
-use super::{Acquisition, Rpc00b};
 use crate::{Result, RpcModel};
 
 const VALIDITY: [&str; 10] = [

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
+use super::fields::{metadata_error, nitf_datetime, Acquisition};
 use super::xml::leaves;
-use super::{metadata_error, nitf_datetime, Acquisition};
 use crate::Result;
 
 const DATE_ITEMS: [&str; 2] = ["NITF_IDATIM", "NITF_STDIDC_ACQUISITION_DATE"];

@@ -5,7 +5,7 @@
 use std::fmt::Write;
 use std::path::Path;
 
-use super::{number, rpc_error, Rpc00b};
+use super::fields::{number, rpc_error, Rpc00b};
 use crate::{Result, RpcModel};
 
 const OFFSETS: [&str; 5] = ["LINE_OFF", "SAMP_OFF", "LAT_OFF", "LONG_OFF", "HEIGHT_OFF"];

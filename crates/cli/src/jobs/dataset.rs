@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, Parser};
+use clap::Args;
 use pipeline::jobs::script::{quote, split};
 use seasonstereo::{chain_status, resubmit_slurm_chain, submit_slurm_chain, ChainRequest};
 use seasonstereo::{ChainStatus, ChainSubmitted, StageLine};
@@ -79,13 +79,17 @@ pub struct SlurmDatasetArgs {
 }
 
 /// Submits the chain and reports its jobs.
-pub fn submit(a: SlurmDatasetArgs) -> Result<()> {
+/// Parses a whole `seasonstereo` command line (the program's name first), as `main` does: how
+/// the stage lines are checked before any task starts (given by `main`, which owns the parser).
+pub type ParseLine = fn(&[String]) -> std::result::Result<(), clap::Error>;
+
+pub fn submit(a: SlurmDatasetArgs, parse: ParseLine) -> Result<()> {
     let request = ChainRequest {
         what: "dataset".into(),
         binary: std::env::current_exe().context("locating the seasonstereo binary")?,
         cwd: std::env::current_dir().context("reading the current folder")?,
         work: a.work.clone(),
-        stages: stage_lines(&a)?,
+        stages: stage_lines(&a, parse)?,
         shards: a.shards,
         sbatch_args: split(a.sbatch_args.as_deref().unwrap_or(""))?,
         wait: a.wait,
@@ -128,7 +132,7 @@ const BUILD: &str = "dataset build --pairs {P} --selected {W}/curate/selected.tx
     {W}/synthetic --masks {W}/masks --teacher {W}/teacher -o {O}";
 
 /// The six stage lines, each checked by the parser; the global flags go to every stage.
-fn stage_lines(a: &SlurmDatasetArgs) -> Result<Vec<StageLine>> {
+fn stage_lines(a: &SlurmDatasetArgs, parse: ParseLine) -> Result<Vec<StageLine>> {
     let word = |w: &str| match w {
         "{P}" => a.pairs.display().to_string(),
         "{R}" => a.raw.display().to_string(),
@@ -144,7 +148,7 @@ fn stage_lines(a: &SlurmDatasetArgs) -> Result<Vec<StageLine>> {
         let mut args: Vec<String> = template.split_whitespace().map(word).collect();
         args.extend(extra(flag, extra_text(a, flag))?);
         args.extend(global_flags());
-        check_line(name, flag, &args)?;
+        check_line(name, flag, &args, parse)?;
         let sbatch_args = stage_sbatch
             .iter()
             .filter(|(stage, _)| stage == name)
@@ -219,10 +223,12 @@ fn global_flags() -> Vec<String> {
 }
 
 /// Parses a stage line as `seasonstereo` would, so a typo fails here rather than on the cluster.
-fn check_line(name: &str, flag: &str, args: &[String]) -> Result<()> {
-    let argv = std::iter::once("seasonstereo".to_string()).chain(args.iter().cloned());
-    match crate::Cli::try_parse_from(argv) {
-        Ok(_) => Ok(()),
+fn check_line(name: &str, flag: &str, args: &[String], parse: ParseLine) -> Result<()> {
+    let argv: Vec<String> = std::iter::once("seasonstereo".to_string())
+        .chain(args.iter().cloned())
+        .collect();
+    match parse(&argv) {
+        Ok(()) => Ok(()),
         Err(e) => {
             let first = e.to_string();
             let first = first
@@ -302,7 +308,7 @@ pub fn status(work: &Path, stage: Option<&str>) -> Result<()> {
     print_stages(&s, shown);
     match shown.iter().find(|st| !st.shards.complete()) {
         None => finished(&s, stage),
-        Some(st) => super::incomplete(&st.shards, &format!("{} shards", st.name), work),
+        Some(st) => super::units::incomplete(&st.shards, &format!("{} shards", st.name), work),
     }
 }
 
@@ -324,7 +330,7 @@ fn print_stages(s: &ChainStatus, shown: &[seasonstereo::StageStatus]) {
             u.failed.len(),
             u.missing.len()
         );
-        super::print_units(u);
+        super::units::print_units(u);
     }
 }
 

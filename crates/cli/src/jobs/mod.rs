@@ -4,6 +4,7 @@
 //! live in the library.
 
 mod dataset;
+mod units;
 
 use std::path::{Path, PathBuf};
 
@@ -12,7 +13,7 @@ use clap::{Args, Subcommand};
 use pipeline::jobs::script::{quote, split};
 use pipeline::outputs::Incomplete;
 use seasonstereo::{
-    job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted, Units,
+    job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted,
 };
 
 use crate::reconstruct::ReconstructArgs;
@@ -129,10 +130,10 @@ const JOB_OPTIONS: [(&str, bool); 6] = [
 /// Options each task sets itself.
 const TASK_OPTIONS: [&str; 3] = ["--shard", "--merge", "--tiles-only"];
 
-pub fn run(a: JobsArgs) -> Result<()> {
+pub fn run(a: JobsArgs, parse: dataset::ParseLine) -> Result<()> {
     match a.command {
         JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(*r),
-        JobsCommand::Slurm(SlurmCommand::Dataset(d)) => dataset::submit(*d),
+        JobsCommand::Slurm(SlurmCommand::Dataset(d)) => dataset::submit(*d, parse),
         JobsCommand::Status(s) if pipeline::jobs::is_chain(&s.work.work) => {
             dataset::status(&s.work.work, s.stage.as_deref())
         }
@@ -262,7 +263,7 @@ fn print_status(s: &JobStatus) -> Result<()> {
         s.tiles.missing.len(),
         r.array_size
     );
-    print_units(&s.tiles);
+    units::print_units(&s.tiles);
     if s.tiles.complete() {
         println!(
             "every tile is finished; the DSM is the merge's ({})",
@@ -270,36 +271,5 @@ fn print_status(s: &JobStatus) -> Result<()> {
         );
         return Ok(());
     }
-    incomplete(&s.tiles, "tiles", &s.work)
-}
-
-/// One line per failed (with its error) and missing unit.
-fn print_units(units: &Units) {
-    for (id, task, error) in &units.failed {
-        println!("failed  {id} (task {task}): {error}");
-    }
-    for (id, task) in &units.missing {
-        println!("missing {id} (task {task})");
-    }
-}
-
-/// The command that resubmits the failed and missing units' tasks, and exit code 2 naming
-/// them (`what`: "tiles", "teacher shards").
-fn incomplete(units: &Units, what: &str, work: &Path) -> Result<()> {
-    println!(
-        "resubmit only these (array tasks {}): seasonstereo jobs resubmit --work {}",
-        units.rerun_array(),
-        quote(&work.display().to_string())
-    );
-    let names = units.unfinished();
-    Err(Incomplete::Partial {
-        message: format!(
-            "{} of {} {what} failed or missing ({}): resubmit them as above",
-            names.len(),
-            units.len(),
-            pipeline::outputs::first_names(&names)
-        ),
-        failed: names,
-    }
-    .into())
+    units::incomplete(&s.tiles, "tiles", &s.work)
 }

@@ -14,7 +14,7 @@ use crate::reconstruct::many::{reconstruct_many, ReconstructManyOptions};
 use crate::reconstruct::{reconstruct, ReconstructOptions};
 use crate::world_dates::{write_dated_stack, ACQUISITIONS};
 
-use super::DemoOptions;
+use super::options::DemoOptions;
 
 /// Side of the six-date world, pixels: at most the demo's, at most 384 (six renders and six
 /// pairs stay within seconds).

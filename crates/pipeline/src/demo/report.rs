@@ -9,7 +9,8 @@ use synth::Season;
 
 use super::dsms::{DFC_CLASSES, DSM_ERROR_MAX};
 use super::format::{matcher_flags, metres, percent, pixels};
-use super::summary::{DemoOptions, PairResult};
+use super::options::DemoOptions;
+use super::summary::PairResult;
 use super::ManyDatesResult;
 use crate::eval::metrics::DsmScores;
 use crate::metrics::DisparityScores;

@@ -1,23 +1,9 @@
-//! What the demo runs on and what it measured: the CLI prints these and the report tells them.
+//! What the demo measured: the CLI prints these and the report tells them.
 
 use std::path::PathBuf;
 
-use matching::SgmParams;
-
 use crate::eval::metrics::DsmScores;
 use crate::metrics::DisparityScores;
-
-/// What the demo runs on.
-#[derive(Clone, Debug)]
-pub struct DemoOptions {
-    /// Image size of the world, pixels.
-    pub size: usize,
-    /// Seed of the world and of the built-in seasonal model.
-    pub seed: u64,
-    /// Folder of the report and its images.
-    pub out_dir: PathBuf,
-    pub sgm: SgmParams,
-}
 
 /// Altitude scores of one DSM: the benchmark's numbers and the MAE per ground-truth class.
 #[derive(Clone, Debug)]

@@ -20,6 +20,7 @@
 //! - [`Scheme::Robust`], seasonstereo's earlier variant: aligned 2×2 blocks down to a smaller side
 //!   of `min_level_size`, a minimum overlap, and ties broken towards the level's centre.
 
+use raster::resize::block_mean_finite;
 use raster::Image;
 
 /// The release's pyramid: halve while the smaller side exceeds this many cells.
@@ -163,29 +164,6 @@ impl Moments {
     }
 }
 
-/// Halves a raster: each cell is the mean of the finite cells of its 2×2 block (NaN when none).
-fn downsample_aligned(image: &Image) -> Image {
-    let (w, h) = image.size();
-    let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
-    Image::from_fn(nw, nh, |x, y| {
-        let (mut s, mut n) = (0.0f64, 0usize);
-        for yy in 2 * y..(2 * y + 2).min(h) {
-            for xx in 2 * x..(2 * x + 2).min(w) {
-                let v = image.get(xx, yy, 0);
-                if v.is_finite() {
-                    s += v as f64;
-                    n += 1;
-                }
-            }
-        }
-        if n == 0 {
-            f32::NAN
-        } else {
-            (s / n as f64) as f32
-        }
-    })
-}
-
 /// The best shift within `radius` of `centre` at one level, by NCC; `None` when no shift has a
 /// defined NCC over enough cells.
 fn search(
@@ -248,7 +226,7 @@ fn align_robust(
         if g.width().min(g.height()) / 2 < min_level_size.max(1) {
             break;
         }
-        let next = (downsample_aligned(g), downsample_aligned(p));
+        let next = (block_mean_finite(g, 2), block_mean_finite(p, 2));
         levels.push(next);
     }
     let mut shift = (0i32, 0i32);

@@ -12,7 +12,7 @@ use camera::{rasterize_window, rasterize_window_with, triangulate_disparity, Gri
 use raster::Image;
 
 use super::plan::Tile;
-use super::tile::{core_mask, Scene};
+use super::scene::{core_mask, Scene};
 use crate::matcher::{Matcher, RangeSource};
 use crate::Silent;
 use camera::rectify::Rectification;

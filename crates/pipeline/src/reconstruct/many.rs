@@ -35,6 +35,7 @@ use camera::{write_dsm, Crs, DsmGrid, Gridding, UtmZone};
 use dataset::shard::Shard;
 use raster::Image;
 use serde::Serialize;
+use serde_json::json;
 
 use super::fuse::{fuse_files, pair_weight, Agreement, Fused, FusionParams, Layer, Shift};
 use super::raw::RawImage;
@@ -47,8 +48,9 @@ use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS}
 use crate::eval::align::{align, AlignParams};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
-use crate::outputs::{check_output_file, check_output_folder};
+use crate::outputs::{check_output_file, check_output_folder, resolve};
 use crate::progress::{Progress, Sequence};
+use crate::provenance::{delivery_files, grid_input, grid_json, InputFile, Product, RunRecord};
 use crate::rectify::{altitude_range, camera_of, file_stem};
 use crate::stage::write_json;
 
@@ -143,6 +145,51 @@ pub fn auto_min_confidence(pairs: usize) -> f32 {
 }
 
 impl ReconstructManyOptions {
+    /// The record of this run in its work folder ([`crate::provenance`]).
+    pub fn run_record(&self) -> RunRecord {
+        let o = self;
+        let mut inputs: Vec<InputFile> = Vec::new();
+        for image in &o.images {
+            inputs.push(InputFile::of("image", image));
+            let camera = o.rpc_dir.as_ref().and_then(|dir| {
+                let stem = image.file_stem()?;
+                Some(dir.join(format!("{}.json", stem.to_string_lossy())))
+            });
+            inputs.extend(camera.map(|c| InputFile::of("camera", &c)));
+            inputs.extend(delivery_files(image));
+        }
+        inputs.extend(grid_input(&o.grid).map(|p| InputFile::of("like", p)));
+        inputs.extend(o.truth.as_deref().map(|p| InputFile::of("truth", p)));
+        RunRecord {
+            command: "reconstruct-many".into(),
+            inputs,
+            work: json!({
+                "grid": grid_json(&o.grid),
+                "pairs": o.pairs,
+                "pair_median_filter": o.pair_median_filter,
+                "both_views": o.both_views,
+                "alt_range": o.alt_range,
+                "adjust_pointing": o.adjust_pointing,
+                "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
+                "gridding": format!("{:?}", o.gridding),
+                "tile": o.tile,
+                "collar": o.collar,
+            }),
+            product: Product {
+                output: resolve(&o.output),
+                finishing: json!({
+                    "cluster_tolerance": o.cluster_tolerance,
+                    "min_support": o.min_support,
+                    "min_confidence": o.min_confidence,
+                    "co_register": o.co_register,
+                    "weight_pairs": o.weight_pairs,
+                    "fill_holes": o.fill_holes,
+                    "median_filter": o.median_filter,
+                }),
+            },
+        }
+    }
+
     /// The defaults: the best 12 pairs, 0.5 m clusters, agreement by [`auto_min_confidence`]
     /// (else [`auto_min_support`]), no co-registration, equal weights, fill 40 cells, 7×7
     /// median.
@@ -342,7 +389,7 @@ pub fn reconstruct_many(
         return Ok(summary);
     }
     let rows = fusion_rows(&grids.fused, summary.chosen.len(), opts.max_memory)?;
-    crate::provenance::claim(&summary.work, &crate::provenance::RunRecord::of_many(opts))?;
+    crate::provenance::claim(&summary.work, &opts.run_record())?;
     run_pairs(opts, &mut summary, &grids, progress);
     if opts.shard != Shard::ALL {
         summary.shard = Some(format!("{}/{}", opts.shard.index, opts.shard.count));
@@ -394,10 +441,7 @@ fn plan(
     let adjust = super::pointing::needs_adjustment(views.iter().map(|v| &v.rpc));
     let pointing = if opts.adjust_pointing && adjust && !opts.dry_run {
         // The adjusted cameras are the work folder's first content: it is this run's from now.
-        crate::provenance::claim(
-            &opts.work_dir(),
-            &crate::provenance::RunRecord::of_many(opts),
-        )?;
+        crate::provenance::claim(&opts.work_dir(), &opts.run_record())?;
         match adjust_cameras(opts, &mut views, zone, progress) {
             Ok(p) => Some(p),
             // Cameras that carry the scene's altitudes can go on as given, said loudly.
@@ -1101,7 +1145,7 @@ fn check_outputs(opts: &ReconstructManyOptions) -> Result<()> {
     // Last, as it may clear another run's work folder (with --overwrite): a rerun of the same
     // run resumes it and rewrites its products; a dry run writes nothing.
     if !opts.dry_run {
-        let run = crate::provenance::RunRecord::of_many(opts);
+        let run = opts.run_record();
         crate::provenance::check(&opts.work_dir(), &run, &outputs, &inputs, opts.overwrite)?;
     }
     Ok(())
@@ -1179,8 +1223,8 @@ fn fusion_rows(grid: &DsmGrid, pairs: usize, max_memory: u64) -> Result<usize> {
              use a coarser --resolution or raise --max-memory",
             grid.width,
             grid.height,
-            super::gib(held),
-            super::gib(max_memory)
+            crate::flags::gib(held),
+            crate::flags::gib(max_memory)
         );
     }
     // A block of every pair (heights and confidences: read buffer and copy) in an eighth of what

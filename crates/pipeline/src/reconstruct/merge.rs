@@ -17,11 +17,11 @@ use rayon::prelude::*;
 use super::folder::TileFolder;
 use super::mosaic::Mosaic;
 use super::tile::{TileRecord, TileStatus};
-use super::{gib, ReconstructOptions};
 use crate::dsm::{
     confidence_path, filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS,
     DEFAULT_FILL_REACH, DEFAULT_MEDIAN_CELLS,
 };
+use crate::flags::gib;
 
 /// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
 /// block as it comes); with its halo, about 180 MiB for a 16,384-cell-wide grid with the default
@@ -57,18 +57,6 @@ impl Default for Finishing {
 }
 
 impl Finishing {
-    pub fn of(opts: &ReconstructOptions) -> Self {
-        Finishing {
-            gridding: opts.gridding,
-            fill_holes: opts.fill_holes.map(|span| HoleFill {
-                span,
-                reach: opts.fill_reach.min(span),
-            }),
-            median_filter: opts.median_filter,
-            confidence: opts.matcher.gives_confidence(),
-        }
-    }
-
     /// Rows above and below a cell that its finished height depends on: the filling's rays walk
     /// `span` cells (the diagonals as many rows), and the median reads `window / 2` rows of
     /// filled cells.
@@ -263,7 +251,6 @@ mod tests {
     use super::super::fabricated::fabricate_tiles;
     use super::*;
     use crate::dsm::{DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
-    use crate::reconstruct::ReconstructOptions;
 
     /// The merge as it was before blocks: the whole grid at once, written whole.
     fn merge_whole_grid(
@@ -394,32 +381,6 @@ mod tests {
         older[done].confidence = None;
         merge_tiles(&finishing, &made.grid, &folder, &older, &out, 32).unwrap();
         assert!(out.is_file() && !confidence_path(&out).exists());
-    }
-
-    /// The options' rays and reach become the finishing's, the reach never past the rays (a
-    /// cell's nearest ray end is within them anyway), and no filling stays none.
-    #[test]
-    fn the_options_fill_within_their_reach() {
-        let mut o = ReconstructOptions::new(
-            "l.tif".into(),
-            "r.tif".into(),
-            crate::matcher::Matcher::Classical(Default::default()),
-            crate::dsm::GridChoice::Like("t.tif".into()),
-            "o.tif".into(),
-        );
-        assert_eq!(Finishing::of(&o), Finishing::default());
-        let fill = |o: &ReconstructOptions| Finishing::of(o).fill_holes;
-        assert_eq!(
-            fill(&o),
-            Some(HoleFill {
-                span: DEFAULT_FILL_CELLS,
-                reach: DEFAULT_FILL_REACH
-            })
-        );
-        o.fill_reach = 1000;
-        assert_eq!(fill(&o), Some(HoleFill::spanning(DEFAULT_FILL_CELLS)));
-        o.fill_holes = None;
-        assert_eq!(fill(&o), None);
     }
 
     #[test]

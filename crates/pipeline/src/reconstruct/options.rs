@@ -4,12 +4,15 @@
 use std::path::{Path, PathBuf};
 
 use camera::rectify::Roi;
-use camera::Gridding;
+use camera::{Gridding, HoleFill};
 use dataset::shard::Shard;
+use serde_json::json;
 
 use super::merge::Finishing;
 use crate::dsm::{GridChoice, DEFAULT_FILL_REACH};
 use crate::matcher::Matcher;
+use crate::outputs::resolve;
+use crate::provenance::{delivery_files, grid_input, grid_json, InputFile, Product, RunRecord};
 
 /// Tile side, left raw pixels: an affine rectification holds over about a kilometre.
 pub const DEFAULT_TILE: usize = 1024;
@@ -93,6 +96,66 @@ pub struct ReconstructOptions {
 }
 
 impl ReconstructOptions {
+    /// How the merged cells become the DSM: these options' gridding, filling and median.
+    pub fn finishing(&self) -> Finishing {
+        let opts = self;
+        Finishing {
+            gridding: opts.gridding,
+            fill_holes: opts.fill_holes.map(|span| HoleFill {
+                span,
+                reach: opts.fill_reach.min(span),
+            }),
+            median_filter: opts.median_filter,
+            confidence: opts.matcher.gives_confidence(),
+        }
+    }
+
+    /// The record of this run in its work folder ([`crate::provenance`]; also each pair's of
+    /// `reconstruct-many`).
+    pub fn run_record(&self) -> RunRecord {
+        let o = self;
+        let mut inputs = vec![
+            InputFile::of("left", &o.left),
+            InputFile::of("right", &o.right),
+        ];
+        let optional = [
+            ("rpc_left", o.rpc_left.as_deref()),
+            ("rpc_right", o.rpc_right.as_deref()),
+            ("like", grid_input(&o.grid)),
+            ("truth", o.truth.as_deref()),
+        ];
+        for (role, path) in optional {
+            inputs.extend(path.map(|p| InputFile::of(role, p)));
+        }
+        inputs.extend(delivery_files(&o.left).chain(delivery_files(&o.right)));
+        RunRecord {
+            command: "reconstruct".into(),
+            inputs,
+            work: json!({
+                "roi": o.roi,
+                "roi_lonlat": o.roi_lonlat,
+                "alt_range": o.alt_range,
+                "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
+                "grid": grid_json(&o.grid),
+                "gridding": format!("{:?}", o.gridding),
+                "border": o.border,
+                "tile": o.tile,
+                "collar": o.collar,
+                "both_views": o.both_views,
+                "level_ground": o.level_ground,
+                "adjust_pointing": o.adjust_pointing,
+            }),
+            product: Product {
+                output: resolve(&o.output),
+                finishing: json!({
+                    "fill_holes": o.fill_holes,
+                    "fill_reach": o.fill_reach,
+                    "median_filter": o.median_filter,
+                }),
+            },
+        }
+    }
+
     /// The defaults for a pair: whole image, 1024-pixel tiles with 64-pixel collars, 2 GiB.
     pub fn new(
         left: PathBuf,
@@ -186,7 +249,7 @@ impl ReconstructOptions {
         }
         crate::outputs::check_dsm_extension("-o", &self.output)?;
         crate::outputs::check_products(&self.products, &self.output, &inputs, &mut outputs)?;
-        let run = crate::provenance::RunRecord::of_reconstruct(self);
+        let run = self.run_record();
         crate::provenance::check(&self.work(), &run, &outputs, &inputs, overwrite)
     }
 
@@ -206,4 +269,36 @@ impl ReconstructOptions {
 /// The default work folder of an output DSM: `out/dsm.tif` → `out/dsm_work`.
 pub fn default_work_dir(output: &Path) -> PathBuf {
     crate::dsm::sidecar_path(output, "_work")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dsm::DEFAULT_FILL_CELLS;
+
+    /// The options' rays and reach become the finishing's, the reach never past the rays (a
+    /// cell's nearest ray end is within them anyway), and no filling stays none.
+    #[test]
+    fn the_options_fill_within_their_reach() {
+        let mut o = ReconstructOptions::new(
+            "l.tif".into(),
+            "r.tif".into(),
+            crate::matcher::Matcher::Classical(Default::default()),
+            crate::dsm::GridChoice::Like("t.tif".into()),
+            "o.tif".into(),
+        );
+        assert_eq!(o.finishing(), Finishing::default());
+        let fill = |o: &ReconstructOptions| o.finishing().fill_holes;
+        assert_eq!(
+            fill(&o),
+            Some(HoleFill {
+                span: DEFAULT_FILL_CELLS,
+                reach: DEFAULT_FILL_REACH
+            })
+        );
+        o.fill_reach = 1000;
+        assert_eq!(fill(&o), Some(HoleFill::spanning(DEFAULT_FILL_CELLS)));
+        o.fill_holes = None;
+        assert_eq!(fill(&o), None);
+    }
 }

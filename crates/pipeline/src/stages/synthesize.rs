@@ -251,11 +251,7 @@ pub fn index_files(dir: &Path, exts: &[&str]) -> Result<HashMap<String, PathBuf>
                 stack.push(p);
                 continue;
             }
-            let ext = p
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(str::to_ascii_lowercase)
-                .unwrap_or_default();
+            let ext = raster::formats::extension_of(&p);
             let Some(stem) = p.file_stem().and_then(|s| s.to_str()) else {
                 continue;
             };

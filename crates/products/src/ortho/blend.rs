@@ -1,6 +1,6 @@
 //! How the views' colours of one cell become the orthoimage's colour.
 
-use super::OrthoBlend;
+use super::view::OrthoBlend;
 
 /// One view's colour of a cell.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -16,9 +16,10 @@ mod directions;
 mod lonlat;
 mod radiometry;
 mod source;
+mod view;
 mod visibility;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use camera::{DsmGrid, RpcModel};
 use raster::formats::{write_tiled_u8, GeoTiffMeta};
@@ -31,27 +32,8 @@ use self::source::ViewImage;
 use self::visibility::MaxPyramid;
 use crate::{ProductsError, Result};
 
+pub use self::view::{OrthoBlend, OrthoView};
 pub use self::visibility::{visibility, TOLERANCE_M};
-
-/// One view of the scene: its image (a TIFF of any size; uint8, uint16 or float; 1 band, 3, or
-/// more of which the first three are used) and its camera.
-#[derive(Clone, Debug)]
-pub struct OrthoView {
-    pub image: PathBuf,
-    pub rpc: RpcModel,
-}
-
-/// How a cell's colour is chosen among the views.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum OrthoBlend {
-    /// The most nadir view that sees the cell (the least oblique: the sharpest, and the one
-    /// whose small errors of height move the colour least).
-    #[default]
-    MostNadir,
-    /// Per channel, the median of the views that see the cell: evens out the dates' lighting
-    /// and hides a passing car, at the cost of some sharpness.
-    Median,
-}
 
 /// The true orthoimage of `dsm` (heights on `grid`, NaN where unknown) from `views`: RGB, values
 /// 0–255, `(0, 0, 0)` where the cell has no height or no view images it (and only there: real
@@ -63,7 +45,7 @@ pub fn orthoimage(
     views: &[OrthoView],
     blend: OrthoBlend,
 ) -> Result<Image> {
-    check_dsm(dsm, grid)?;
+    grid.check_heights(dsm, "orthoimage")?;
     let (w, h) = dsm.size();
     let mut out = vec![0.0f32; w * h * 3];
     let (Some(heights), Some(range)) = (BlockHeights::new(dsm), dsm.finite_range()) else {
@@ -151,19 +133,4 @@ impl PreparedView<'_> {
         let seen = !pyramid.occluded(col, row, z, self.directions.at(col, row));
         Some(Sample { rgb, seen })
     }
-}
-
-/// A DSM must be one channel on its grid.
-fn check_dsm(dsm: &Image, grid: &DsmGrid) -> Result<()> {
-    if dsm.size() != (grid.width, grid.height) || dsm.channels() != 1 {
-        return Err(ProductsError::Input(format!(
-            "the DSM is {}x{}x{} but its grid is {}x{}",
-            dsm.width(),
-            dsm.height(),
-            dsm.channels(),
-            grid.width,
-            grid.height
-        )));
-    }
-    Ok(())
 }

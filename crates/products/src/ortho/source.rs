@@ -6,7 +6,7 @@ use camera::{DsmGrid, RpcModel};
 use raster::formats::TiffReader;
 
 use super::radiometry::Levels;
-use super::OrthoView;
+use super::view::OrthoView;
 use crate::Result;
 
 /// Pixels added around the projected footprint: the bilinear taps and the RPC's curvature

@@ -128,7 +128,7 @@ fn exit(x0: f64, y0: f64, (dc, dr): (f64, f64), (bx, by): (usize, usize), size: 
 /// and the line of sight from its top towards the satellite does not pass below the DSM by more
 /// than [`TOLERANCE_M`]. Lines of sight leaving the grid are taken as clear.
 pub fn visibility(dsm: &Image, grid: &DsmGrid, rpc: &RpcModel) -> Result<Mask> {
-    super::check_dsm(dsm, grid)?;
+    grid.check_heights(dsm, "visibility")?;
     let (w, h) = dsm.size();
     let Some(heights) = BlockHeights::new(dsm) else {
         return Ok(Mask::filled(w, h, false));

@@ -11,7 +11,7 @@ use camera::DsmGrid;
 use las::point::Format;
 use las::{Builder, Color, Header, Point, Transform, Vector, Vlr, Writer};
 
-use super::Cells;
+use super::cells::Cells;
 use crate::atomic::write_owned_atomically;
 use crate::{ProductsError, Result};
 

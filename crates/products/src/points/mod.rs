@@ -3,6 +3,7 @@
 //! CRS, coloured by the orthoimage. LAS/LAZ for GIS and lidar tools, PLY for mesh tools (s2p's
 //! layout).
 
+mod cells;
 mod las_file;
 mod ply_file;
 
@@ -11,60 +12,11 @@ use std::path::Path;
 use camera::DsmGrid;
 use raster::Image;
 
+use self::cells::Cells;
 use crate::{ProductsError, Result};
 
 /// The extensions [`write_point_cloud`] understands.
 pub const POINT_CLOUD_EXTENSIONS: &[&str] = &["las", "laz", "ply"];
-
-/// One point of the cloud: the centre of a cell, its height and its colour.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct CloudPoint {
-    x: f64,
-    y: f64,
-    z: f64,
-    rgb: Option<[u8; 3]>,
-}
-
-/// The cells that become points, in row order.
-struct Cells<'a> {
-    dsm: &'a Image,
-    grid: &'a DsmGrid,
-    colours: Option<&'a Image>,
-    keep: Option<&'a [bool]>,
-}
-
-impl Cells<'_> {
-    fn iter(&self) -> impl Iterator<Item = CloudPoint> + '_ {
-        let w = self.grid.width;
-        self.dsm
-            .data()
-            .iter()
-            .enumerate()
-            .filter(|&(i, z)| z.is_finite() && self.keep.is_none_or(|k| k[i]))
-            .map(move |(i, &z)| {
-                let (x, y) = self.grid.cell_centre(i % w, i / w);
-                let rgb = self.colours.map(|c| {
-                    let px = &c.data()[i * 3..i * 3 + 3];
-                    [px[0], px[1], px[2]].map(|v| v.round().clamp(0.0, 255.0) as u8)
-                });
-                CloudPoint {
-                    x,
-                    y,
-                    z: z as f64,
-                    rgb,
-                }
-            })
-    }
-
-    fn count(&self) -> usize {
-        self.dsm
-            .data()
-            .iter()
-            .enumerate()
-            .filter(|&(i, z)| z.is_finite() && self.keep.is_none_or(|k| k[i]))
-            .count()
-    }
-}
 
 /// Writes the point cloud of `dsm` (lying on `grid`) at `path`, atomically; returns the number of
 /// points. One point per cell with a finite height and `keep[cell]` true (when given, row-major,
@@ -87,11 +39,7 @@ pub fn write_point_cloud(
         colours,
         keep,
     };
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
+    let ext = raster::formats::extension_of(path);
     match ext.as_str() {
         "las" | "laz" => las_file::write(path, grid, &cells, ext == "laz"),
         "ply" => ply_file::write(path, grid, &cells),
@@ -113,6 +61,7 @@ fn check_inputs(
     colours: Option<&Image>,
     keep: Option<&[bool]>,
 ) -> Result<()> {
+    grid.check_heights(dsm, &path.display().to_string())?;
     let size = (grid.width, grid.height);
     let mismatch = |what: &str, got: String| {
         Err(ProductsError::Input(format!(
@@ -122,10 +71,6 @@ fn check_inputs(
             grid.height
         )))
     };
-    if dsm.size() != size || dsm.channels() != 1 {
-        let (w, h, c) = (dsm.width(), dsm.height(), dsm.channels());
-        return mismatch("DSM", format!("{w}x{h}x{c}"));
-    }
     if let Some(c) = colours.filter(|c| c.size() != size || c.channels() != 3) {
         let (w, h, ch) = (c.width(), c.height(), c.channels());
         return mismatch("colour image (RGB expected)", format!("{w}x{h}x{ch}"));

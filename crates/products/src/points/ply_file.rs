@@ -8,7 +8,7 @@ use std::path::Path;
 use camera::DsmGrid;
 use raster::formats::write_atomically;
 
-use super::Cells;
+use super::cells::Cells;
 use crate::Result;
 
 /// Writes the points of `cells` as a binary little-endian PLY at `path`; returns their number.

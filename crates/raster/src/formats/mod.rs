@@ -38,12 +38,17 @@ enum Kind {
     Pfm,
 }
 
-fn kind_of(path: &Path) -> Result<Kind> {
-    let ext = path
-        .extension()
+/// The extension of `path` in lower case (empty when it has none): what the formats are told
+/// apart by, whatever the case of the file name.
+pub fn extension_of(path: &Path) -> String {
+    path.extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
+        .unwrap_or_default()
+}
+
+fn kind_of(path: &Path) -> Result<Kind> {
+    let ext = extension_of(path);
     match ext.as_str() {
         "npy" | "iio" => Ok(Kind::Npy),
         "tif" | "tiff" => Ok(Kind::Tiff),

@@ -276,13 +276,15 @@ impl TiffReader {
         self.layout.bands
     }
 
-    /// The metadata, to write another raster on the same grid with [`write_geotiff`].
+    /// The metadata, to write another raster on the same grid with [`write_geotiff`]; not
+    /// GDAL's metadata, which describes this file's content (an acquisition date, what heights
+    /// are), not the new one's.
     pub fn meta(&self) -> GeoTiffMeta {
         GeoTiffMeta {
             georef: self.georef.clone(),
             nodata: self.nodata,
             rpc: self.rpc.clone(),
-            gdal_metadata: self.gdal_metadata.clone(),
+            gdal_metadata: None,
         }
     }
 

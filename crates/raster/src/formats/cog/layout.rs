@@ -1,7 +1,7 @@
 //! The header and directories (IFDs) of a COG, laid out once every level's tile sizes are known:
 //! they come first in the file, the tile data after them.
 
-use super::{Sample, COG_TILE};
+use super::sample::{Sample, COG_TILE};
 use crate::formats::tiff::{GeoTags, TAG_GDAL_METADATA, TAG_RPC};
 
 /// TIFF field types.

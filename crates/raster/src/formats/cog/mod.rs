@@ -9,6 +9,7 @@
 //! is computed; [`write_cog`] gives it a whole image at once.
 
 mod layout;
+mod sample;
 mod spool;
 mod writer;
 
@@ -17,18 +18,10 @@ use std::path::Path;
 use super::GeoTiffMeta;
 use crate::{Image, Result};
 
+pub use sample::COG_TILE;
 pub use writer::CogWriter;
 
-/// Side of the internal tiles, pixels.
-pub const COG_TILE: usize = 256;
-
-/// How samples are stored.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Sample {
-    F32,
-    /// Rounded and clamped to 0–255; NaN becomes 0.
-    U8,
-}
+use sample::Sample;
 
 /// Writes `image` (float32, 1–16 bands) as a tiled, Deflate-compressed GeoTIFF with overviews
 /// and the georeferencing, GDAL_NODATA and RPC tags of `meta` (on the full-resolution image;

@@ -10,8 +10,8 @@ use flate2::write::ZlibEncoder;
 use rayon::prelude::*;
 
 use super::layout::{layout, LevelTiles};
+use super::sample::{Sample, COG_TILE};
 use super::spool::Spool;
-use super::{Sample, COG_TILE};
 use crate::formats::support::write_atomically;
 use crate::formats::tiff::{geo_tags, GeoTags};
 use crate::formats::GeoTiffMeta;
