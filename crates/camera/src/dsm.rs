@@ -7,7 +7,7 @@ use raster::formats::{read_tiff, GeoRaster, GeoReference, GeoTiffMeta};
 use raster::Image;
 use rayon::prelude::*;
 
-use crate::{CameraError, Crs, Points, Result, UtmZone};
+use crate::{Band, CameraError, Crs, Points, Result, UtmZone};
 
 /// A north-up grid of square cells in a map projection (UTM by default, any EPSG code): cell
 /// (col, row) covers x (eastings) [x0 + col·res, x0 + (col+1)·res) and y (northings)
@@ -633,39 +633,45 @@ pub fn median_filter(dsm: &Image, window: usize) -> Image {
 /// Writes a DSM of ellipsoidal heights as a float32 Cloud-Optimized GeoTIFF on `grid`
 /// (georeference, EPSG, nodata NaN, 256² tiles, overviews), atomically.
 pub fn write_dsm(path: impl AsRef<Path>, image: &Image, grid: &DsmGrid) -> Result<()> {
-    write_dsm_heights(path, image, grid, crate::Heights::Ellipsoid)
+    write_grid_raster(path, image, grid, Band::Heights(crate::Heights::Ellipsoid))
 }
 
-/// [`write_dsm`] for heights above `heights`' reference, which the file's metadata names.
-pub fn write_dsm_heights(
+/// [`write_dsm`] for any one-band raster on `grid` (a DSM of other heights, a sidecar), its
+/// metadata saying what `band` holds.
+pub fn write_grid_raster(
     path: impl AsRef<Path>,
     image: &Image,
     grid: &DsmGrid,
-    heights: crate::Heights,
+    band: Band,
 ) -> Result<()> {
     let path = path.as_ref();
     grid.check_heights(image, &path.display().to_string())?;
-    raster::formats::write_cog(path, image, &dsm_meta(grid, heights))?;
+    raster::formats::write_cog(path, image, &dsm_meta(grid, band))?;
     Ok(())
 }
 
-/// A writer of a DSM on `grid` given by blocks of rows, top to bottom: the file [`write_dsm`]
-/// writes, without holding the whole DSM (call `finish` after the last row).
-pub fn dsm_writer(path: impl AsRef<Path>, grid: &DsmGrid) -> Result<raster::formats::CogWriter> {
+/// A writer of a raster on `grid` (holding `band`) given by blocks of rows, top to bottom: the
+/// file [`write_grid_raster`] writes, without holding it whole (call `finish` after the last
+/// row).
+pub fn grid_writer(
+    path: impl AsRef<Path>,
+    grid: &DsmGrid,
+    band: Band,
+) -> Result<raster::formats::CogWriter> {
     let size = (grid.width, grid.height, 1);
     Ok(raster::formats::CogWriter::new(
         path,
         size,
-        &dsm_meta(grid, crate::Heights::Ellipsoid),
+        &dsm_meta(grid, band),
     )?)
 }
 
-/// The tags of a DSM on `grid`: its georeference, NaN as nodata, and what its heights are.
-fn dsm_meta(grid: &DsmGrid, heights: crate::Heights) -> GeoTiffMeta {
+/// The tags of a raster on `grid`: its georeference, NaN as nodata, and what its band holds.
+fn dsm_meta(grid: &DsmGrid, band: Band) -> GeoTiffMeta {
     GeoTiffMeta {
         georef: Some(grid.georeference()),
         nodata: Some(f64::NAN),
         rpc: None,
-        gdal_metadata: Some(heights.gdal_metadata()),
+        gdal_metadata: Some(band.gdal_metadata()),
     }
 }

@@ -24,13 +24,13 @@ pub use adjust::{
 };
 pub use crs::Crs;
 pub use dsm::{
-    dsm_writer, fill_holes, median_filter, rasterize, rasterize_max, rasterize_window,
-    rasterize_window_with, read_dsm, resample_nearest, write_dsm, write_dsm_heights, DsmGrid,
+    fill_holes, grid_writer, median_filter, rasterize, rasterize_max, rasterize_window,
+    rasterize_window_with, read_dsm, resample_nearest, write_dsm, write_grid_raster, DsmGrid,
     DsmRaster, GridWindow, Gridding, HoleFill,
 };
 pub use error::CameraError;
 pub use geoid::{egm96_undulation, to_egm96};
-pub use heights::Heights;
+pub use heights::{Band, Heights};
 pub use rpc::RpcModel;
 pub use triangulate::{altitude, evaluation_mask, triangulate_disparity, Points};
 pub use utm::UtmZone;

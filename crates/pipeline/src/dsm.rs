@@ -215,6 +215,32 @@ pub const FUSED_MEDIAN_CELLS: usize = 7;
 /// Suffix of `reconstruct`'s filled-cell sidecar, beside the DSM (`<stem>_filled.tif`).
 pub const FILLED_SUFFIX: &str = "_filled.tif";
 
+/// What each sidecar's band holds, as its file's metadata says.
+pub mod bands {
+    use camera::Band;
+
+    /// `_filled.tif`.
+    pub const FILLED: Band = Band::Values {
+        description: "0 measured, 1 filled by hole filling, NaN no height",
+        unit: None,
+    };
+    /// `_confidence.tif`.
+    pub const CONFIDENCE: Band = Band::Values {
+        description: "matching confidence of the measured cell, 1 - S1/S2, 0 to 1",
+        unit: None,
+    };
+    /// `reconstruct-many`'s `_count.tif`.
+    pub const COUNT: Band = Band::Values {
+        description: "pairs that measured the cell",
+        unit: None,
+    };
+    /// `reconstruct-many`'s `_spread.tif`.
+    pub const SPREAD: Band = Band::Values {
+        description: "spread of the pairs' heights in the kept cluster",
+        unit: Some("metre"),
+    };
+}
+
 /// `<stem><suffix>` in the folder of `dsm`: where the files that describe a DSM go.
 pub fn sidecar_path(dsm: &Path, suffix: &str) -> PathBuf {
     let stem = dsm.file_stem().map(|s| s.to_string_lossy().into_owned());

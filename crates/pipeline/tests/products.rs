@@ -168,6 +168,19 @@ fn the_orthoimage_sits_on_the_dsm_and_the_point_cloud_holds_its_measured_cells()
         coloured as f64 > 0.99 * measured as f64,
         "{coloured} of {measured}"
     );
+    // Each file says what its band holds: heights for the DSM, counts for the count.
+    let said = |name: &str| {
+        raster::formats::TiffReader::open(out(name))
+            .unwrap()
+            .gdal_metadata
+            .unwrap()
+    };
+    assert!(said("dsm.tif").contains("height above the WGS84 ellipsoid"));
+    let count_says = said("dsm_count.tif");
+    assert!(
+        count_says.contains("pairs that measured the cell") && !count_says.contains("height"),
+        "{count_says}"
+    );
     let png = std::fs::read(out("preview.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use camera::{read_dsm, write_dsm_heights, DsmGrid, Heights};
+use camera::{read_dsm, write_grid_raster, Band, DsmGrid, Heights};
 use raster::Image;
 
 use crate::points::POINT_CLOUD_EXTENSIONS;
@@ -95,7 +95,12 @@ impl Products {
         let mut raster = read_dsm(dsm, None)?;
         if self.heights == Heights::Egm96 {
             camera::to_egm96(&mut raster.image, &raster.grid);
-            write_dsm_heights(dsm, &raster.image, &raster.grid, self.heights)?;
+            write_grid_raster(
+                dsm,
+                &raster.image,
+                &raster.grid,
+                Band::Heights(self.heights),
+            )?;
         }
         let (heights, grid) = (&raster.image, &raster.grid);
         let colours = match (&self.ortho, &self.points) {

@@ -31,7 +31,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use camera::rectify::Roi;
-use camera::{write_dsm, Crs, DsmGrid, Gridding, UtmZone};
+use camera::{write_dsm, write_grid_raster, Crs, DsmGrid, Gridding, UtmZone};
 use dataset::shard::Shard;
 use raster::Image;
 use serde::Serialize;
@@ -44,7 +44,7 @@ use super::select::{
 };
 use super::tile::TileStatus;
 use super::{footprint, reconstruct, score_against_truth, ReconstructOptions};
-use crate::dsm::{finish_dsm, GridChoice, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS};
+use crate::dsm::{bands, finish_dsm, GridChoice, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS};
 use crate::eval::align::{align, AlignParams};
 use crate::eval::metrics::DsmScores;
 use crate::matcher::Matcher;
@@ -757,12 +757,18 @@ fn write_fused(
         &opts.output,
         &["_count.tif", "_spread.tif", crate::dsm::CONFIDENCE_SUFFIX],
     )?;
-    let write = |path: &Path, image: Image| {
-        write_dsm(path, &image, grid).with_context(|| format!("writing {}", path.display()))
+    let write = |path: &Path, image: Image, band| {
+        write_grid_raster(path, &image, grid, band)
+            .with_context(|| format!("writing {}", path.display()))
     };
-    write(&count_path, count)?;
-    write(&spread_path, Image::new(w, h, 1, fused.spreads)?)?;
-    write(&confidence_path, Image::new(w, h, 1, fused.confidences)?)?;
+    write(&count_path, count, bands::COUNT)?;
+    write(
+        &spread_path,
+        Image::new(w, h, 1, fused.spreads)?,
+        bands::SPREAD,
+    )?;
+    let confidences = Image::new(w, h, 1, fused.confidences)?;
+    write(&confidence_path, confidences, bands::CONFIDENCE)?;
     let dsm = Image::new(w, h, 1, fused.heights)?;
     let fill = opts.fill_holes.map(camera::HoleFill::spanning);
     let dsm = finish_dsm(dsm, fill, opts.median_filter)?;

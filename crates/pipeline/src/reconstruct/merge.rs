@@ -8,7 +8,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use anyhow::Result;
-use camera::{dsm_writer, DsmGrid, GridWindow, Gridding, HoleFill};
+use camera::{grid_writer, Band, DsmGrid, GridWindow, Gridding, Heights, HoleFill};
 use raster::formats::cog::COG_TILE;
 use raster::formats::CogWriter;
 use raster::Image;
@@ -139,15 +139,19 @@ pub fn merge_tiles(
         output,
         &[crate::dsm::FILLED_SUFFIX, crate::dsm::CONFIDENCE_SUFFIX],
     )?;
-    let mut dsm_out = Output::create(output, grid)?;
-    let mut filled_out = Output::create(&sidecar, grid)?;
+    let mut dsm_out = Output::create(output, grid, Band::Heights(Heights::Ellipsoid))?;
+    let mut filled_out = Output::create(&sidecar, grid, crate::dsm::bands::FILLED)?;
     // Only when every tile's cells carry it (tiles of an earlier version, resumed, do not); a
     // sidecar left by an earlier run of this output would no longer match the DSM.
     let confidence_file = confidence_path(output);
     let with_confidence =
         finishing.confidence && parts.iter().all(|(r, _)| r.confidence == Some(true));
     let mut confidence_out = if with_confidence {
-        Some(Output::create(&confidence_file, grid)?)
+        Some(Output::create(
+            &confidence_file,
+            grid,
+            crate::dsm::bands::CONFIDENCE,
+        )?)
     } else {
         if confidence_file.is_file() {
             std::fs::remove_file(&confidence_file).map_err(|e| failed(&confidence_file, e))?;
@@ -219,8 +223,8 @@ struct Output<'a> {
 }
 
 impl<'a> Output<'a> {
-    fn create(path: &'a Path, grid: &DsmGrid) -> Result<Self> {
-        let writer = dsm_writer(path, grid).map_err(|e| failed(path, e))?;
+    fn create(path: &'a Path, grid: &DsmGrid, band: Band) -> Result<Self> {
+        let writer = grid_writer(path, grid, band).map_err(|e| failed(path, e))?;
         Ok(Output { path, writer })
     }
 
