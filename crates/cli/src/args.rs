@@ -379,7 +379,8 @@ pub struct GridArgs {
     pub resolution: f64,
     /// EPSG code of the DSM's CRS, projected or geographic: 32617 (UTM 17N), 4326
     /// (longitude/latitude), 3857 (Web Mercator), a national grid (without --like; default: the
-    /// scene's UTM zone). Heights stay ellipsoidal (WGS84) in any CRS.
+    /// scene's UTM zone). Heights are above the WGS84 ellipsoid (the geoid with --heights
+    /// egm96) in any CRS.
     #[arg(long)]
     pub epsg: Option<u32>,
 }

@@ -281,9 +281,10 @@ mod tests {
         .unwrap();
         let filled = filled_mask(&measured, &finished).unwrap();
         camera::write_dsm(output, &finished, grid).unwrap();
-        camera::write_dsm(filled_path(output), &filled, grid).unwrap();
+        let bands = (crate::dsm::bands::FILLED, crate::dsm::bands::CONFIDENCE);
+        camera::write_grid_raster(filled_path(output), &filled, grid, bands.0).unwrap();
         if finishing.confidence {
-            camera::write_dsm(confidence_path(output), &confidence, grid).unwrap();
+            camera::write_grid_raster(confidence_path(output), &confidence, grid, bands.1).unwrap();
         }
         (points, finite(&measured), finite(&finished))
     }
