@@ -7,6 +7,7 @@ use std::sync::{Mutex, OnceLock};
 
 use proj4rs::Proj;
 
+use crate::utm::{A, E2};
 use crate::{CameraError, Result, UtmZone};
 
 /// A coordinate reference system of the ground: longitude and latitude (degrees, WGS84) ↔ the
@@ -207,9 +208,8 @@ impl Crs {
     pub fn units_per_metre(&self, lon: f64, lat: f64) -> f64 {
         const STEP_M: f64 = 100.0;
         // Metres per degree of latitude at `lat` (WGS84 meridian radius of curvature).
-        let (a, e2) = (6_378_137.0_f64, 0.006_694_379_990_14_f64);
         let s = lat.to_radians().sin();
-        let m_per_deg = (a * (1.0 - e2) / (1.0 - e2 * s * s).powf(1.5)).to_radians();
+        let m_per_deg = (A * (1.0 - E2) / (1.0 - E2 * s * s).powf(1.5)).to_radians();
         let dlat = STEP_M / m_per_deg;
         let (x0, y0) = self.forward(lon, lat - dlat / 2.0);
         let (x1, y1) = self.forward(lon, lat + dlat / 2.0);

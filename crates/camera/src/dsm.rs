@@ -178,10 +178,16 @@ impl DsmGrid {
     /// `.txt` georeference of the same area is in.
     pub fn nearest_zone(&self) -> UtmZone {
         self.zone().unwrap_or_else(|| {
-            let (x, y) = self.cell_centre(self.width / 2, self.height / 2);
-            let (lon, lat) = self.crs().inverse(x, y);
+            let (lon, lat) = self.centre_lonlat();
             UtmZone::from_lonlat(lon, lat)
         })
+    }
+
+    /// WGS84 (lon, lat) of the centre of the grid's middle cell: where a scale of the CRS or a
+    /// zone is taken for the whole grid.
+    pub fn centre_lonlat(&self) -> (f64, f64) {
+        let (x, y) = self.cell_centre(self.width / 2, self.height / 2);
+        self.crs().inverse(x, y)
     }
 
     /// Refuses a DSM image that is not one channel of the grid's size, naming `origin` (the

@@ -7,7 +7,8 @@
 
 use crate::{CameraError, Result};
 
-const A: f64 = 6_378_137.0;
+/// WGS84 semi-major axis, metres.
+pub(crate) const A: f64 = 6_378_137.0;
 const F: f64 = 1.0 / 298.257_223_563;
 const K0: f64 = 0.9996;
 const FALSE_EASTING: f64 = 500_000.0;
@@ -16,7 +17,7 @@ const FALSE_NORTHING_SOUTH: f64 = 10_000_000.0;
 /// Third flattening.
 const N: f64 = F / (2.0 - F);
 /// First eccentricity and its square.
-const E2: f64 = F * (2.0 - F);
+pub(crate) const E2: f64 = F * (2.0 - F);
 
 /// Rectifying radius times k0.
 const K0_A: f64 =

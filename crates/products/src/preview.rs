@@ -83,8 +83,7 @@ pub fn write_preview(path: &Path, dsm: &Image, grid: &DsmGrid) -> Result<()> {
 
 /// The ground size of a cell of `grid`, metres (a geographic grid's cells are degrees).
 fn cell_metres(grid: &DsmGrid) -> f64 {
-    let (x, y) = grid.cell_centre(grid.width / 2, grid.height / 2);
-    let (lon, lat) = grid.crs().inverse(x, y);
+    let (lon, lat) = grid.centre_lonlat();
     let per_metre = grid.crs().units_per_metre(lon, lat);
     if per_metre.is_finite() && per_metre > 0.0 {
         grid.resolution / per_metre
