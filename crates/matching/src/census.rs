@@ -21,10 +21,10 @@ pub struct CensusWindow {
 }
 
 impl Default for CensusWindow {
-    /// 5 × 5: 24 bits. Chosen on real WorldView-3 pairs (BENCHMARKS.md, "Real imagery"): with
-    /// MGM's 2-D aggregation it matches more of the changed and shadowed areas of multi-date pairs
-    /// than 7 × 7 or 9 × 7 (cross-season DSM coverage before filling 52 % vs 46 % and 44 %) at
-    /// the same accuracy, and fattens building edges less.
+    /// 5 × 5: 24 bits. Chosen on real WorldView-3 pairs (BENCHMARKS.md, "Real imagery: DFC2019
+    /// JAX_068 development pairs"): with MGM's 2-D aggregation it matches more of the changed and
+    /// shadowed areas of multi-date pairs than 7 × 7 or 9 × 7 (more cross-season DSM coverage
+    /// before filling) at the same accuracy, and fattens building edges less.
     fn default() -> Self {
         Self {
             width: 5,

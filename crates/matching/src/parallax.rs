@@ -4,10 +4,11 @@
 //! image's (swapped, another scene's) it is many pixels, and matching along rows finds little.
 //! Measured on a few dozen patches by normalised cross-correlation at half resolution: a patch
 //! of 15 × 15 half-pixels holds enough texture to be matched unambiguously over a 2-D search of
-//! hundreds of disparities and ±24 rows (at full resolution an 11 × 11 patch found a clear match
-//! on no dev pair, and unclear ones put cross-season pairs at 10 px). On the JAX_068 dev pairs
-//! (BA cameras) the pairs with their own cameras measure 0 px, swapped cameras 4–22 px where
-//! enough patches match; so it costs milliseconds and only speaks with evidence.
+//! hundreds of disparities and ±24 rows (at full resolution an 11 × 11 patch found no clear
+//! match on the dev pairs, and unclear ones put cross-season pairs many pixels off). On the
+//! JAX_068 dev pairs (BA cameras) it tells the pairs with their own cameras from swapped cameras
+//! wherever enough patches match (BENCHMARKS.md, "Images as delivered", "Swapped cameras"); so it
+//! costs milliseconds and only speaks with evidence.
 
 use raster::Image;
 

@@ -9,7 +9,8 @@ use rayon::prelude::*;
 pub(crate) enum Subpixel {
     None,
     /// `δ = (c₋ − c₊) / (2 (c₋ − 2c₀ + c₊))`. Kept for comparison: on census costs it is
-    /// biased towards integers (mean error 0.12 px against 0.10 px on the synthetic test).
+    /// biased towards integers (a larger mean error than the V fit on the synthetic test:
+    /// BENCHMARKS.md, "Census + MGM / SGM").
     #[allow(dead_code)]
     Parabola,
     /// Symmetric V fit (Shimizu–Okutomi): `δ = (c₋ − c₊) / (2 (max(c₋, c₊) − c₀))`.

@@ -2,13 +2,13 @@
 //! backward, for the CPU device in training.
 //!
 //! Why: burn composes leaky ReLU from a comparison, a scaled copy and a select, whose backward
-//! makes two zero tensors and two more selects (on the hourglass's 3-D volumes that cost more
-//! than the convolutions around them), and runs ReLU, sigmoid and `tanh` on one thread (ReLU
-//! alone was 13 % of the main thread's serial time in a training step), forward and again in the
-//! backward (the ConvGRU's gates, every iteration). Here the forward is
-//! one pass over the input and the backward one pass over the saved output: each derivative is
-//! a function of the output (`σ' = σ(1 − σ)`, `tanh' = 1 − tanh²`, (leaky) ReLU: the output's
-//! sign).
+//! makes two zero tensors and two more selects (on the hourglass's 3-D volumes that cost more than
+//! the convolutions around them), and runs ReLU, sigmoid and `tanh` on one thread (ReLU alone was a
+//! large part of the main thread's serial time in a training step: BENCHMARKS.md, "SegFormer and
+//! the training step against PyTorch"), forward and again in the backward (the ConvGRU's gates,
+//! every iteration). Here the forward is one pass over the input and the backward one pass over the
+//! saved output: each derivative is a function of the output (`σ' = σ(1 − σ)`, `tanh' = 1 − tanh²`,
+//! (leaky) ReLU: the output's sign).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

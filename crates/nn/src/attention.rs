@@ -1,9 +1,10 @@
 //! Transformer pieces for inference on the CPU (`flex`) device: multi-head self-attention read
 //! in place from the fused `qkv` projection, and the erf GELU; elsewhere burn's operations.
 //!
-//! Why: burn computes `q·kᵀ` on a transposed view by first copying it (37 GFLOP/s on DINOv2's
-//! 513 tokens), and its erf GELU runs on one thread through a scalar `erff` (6 ms per ViT-S MLP);
-//! these take a third of DINOv2's time (BENCHMARKS.md).
+//! Why: burn computes `q·kᵀ` on a transposed view by first copying it (far below the GEMM's
+//! speed on DINOv2's 513 tokens), and its erf GELU runs on one thread through a scalar `erff`;
+//! together these were a large part of DINOv2's time (BENCHMARKS.md, "MonSter++ against
+//! PyTorch, and where the time goes").
 
 use burn::tensor::activation::{gelu, softmax};
 use burn::tensor::{Tensor, TensorData};

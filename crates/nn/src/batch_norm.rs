@@ -4,8 +4,9 @@
 //!
 //! Why: burn builds the training BatchNorm from about ten tensor operations (a transposed copy,
 //! reductions, broadcasts) and its backward from twenty, each a single-threaded pass over the
-//! volume; on the hourglass's 3-D volumes they were a fifth of the main thread's serial time in
-//! a MonSter++ training step.
+//! volume; on the hourglass's 3-D volumes they were a large part of the main thread's serial
+//! time in a MonSter++ training step (BENCHMARKS.md, "SegFormer and the training step against
+//! PyTorch").
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

@@ -78,7 +78,8 @@ impl fmt::Display for DeviceChoice {
 ///
 /// Why: every CPU kernel splits its work over the pool. Called from outside it, each of the
 /// thousands of operations of a pass hands all its pieces over and puts the calling thread to
-/// sleep until they are done (a futex wait and wake every time: a tenth of a training step);
+/// sleep until they are done (a futex wait and wake every time, a visible share of a training
+/// step: BENCHMARKS.md, "SegFormer and the training step against PyTorch");
 /// called from a pool thread, the operation runs its first piece right there and the other
 /// threads steal the rest.
 pub fn on_cpu_pool<R: Send>(device: &Device, pass: impl FnOnce() -> R + Send) -> R {

@@ -1,8 +1,9 @@
 //! `exp`, the logistic sigmoid and `tanh` on `f32` without calls into libm, so that loops over
 //! them vectorise.
 //!
-//! Why: the ConvGRU's gates (`σ` twice, `tanh` once per hidden value, every iteration) spent 5 %
-//! of a MonSter++ pass in scalar libm calls. These stay within a few ulp of libm's (`exp`:
+//! Why: the ConvGRU's gates (`σ` twice, `tanh` once per hidden value, every iteration) spent a
+//! visible share of a MonSter++ pass in scalar libm calls (BENCHMARKS.md, "MonSter++ against
+//! PyTorch, and where the time goes"). These stay within a few ulp of libm's (`exp`:
 //! relative 3e-7; `tanh`: absolute 2e-7), far inside the parity tolerances.
 
 /// `eˣ` (Cephes' range reduction and polynomial): relative error ≤ 3e-7 on `[−87, 88]`; inputs

@@ -164,10 +164,10 @@ pub fn preset_name(config: &MonsterConfig) -> &'static str {
 ///   attention matrices 2·heads·N² ×3 (scores, softmax, copy).
 ///
 /// The coefficients were calibrated against the peak resident memory measured on the CPU backend
-/// (`/usr/bin/time -v` on `crates/nn/examples/forward.rs`): vits at 256×512, max_disp 416,
-/// 12 or 32 iterations peaks at 422 MB (191 MB of it weights), estimated ~690 MB; tiny at 64×128
-/// peaks at 59 MB. With a 25 % margin the estimate is deliberately conservative (one calibration
-/// size; GPU allocators differ).
+/// (`/usr/bin/time -v` on `crates/nn/examples/forward.rs`): vits at 256×512, max_disp 416, 12 or
+/// 32 iterations, and tiny at 64×128 (BENCHMARKS.md, "MonSter++ forward pass"); the estimate
+/// lies well above the measured peak. With a 25 % margin the estimate is deliberately
+/// conservative (one calibration size; GPU allocators differ).
 pub fn estimate_memory_bytes(
     config: &MonsterConfig,
     height: usize,

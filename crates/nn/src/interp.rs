@@ -2,11 +2,12 @@
 //! `grid_sample(align_corners=True, padding='zeros')` on height-1 images, which is what the geo
 //! encoding lookup does), as a burn backend operation for training on the CPU.
 //!
-//! Why: on tensors, each lookup is two gathers, their weights and a dozen element-wise ops, and
-//! its backward two scatters; burn's CPU gather and scatter compute every index on one thread,
-//! about a fifth of the serial time of a training step. [`linear_taps`] does one pass forward and
-//! one backward. Positions are constants: the gradient flows to the samples only (upstream
-//! detaches the disparity before the lookup).
+//! Why: on tensors, each lookup is two gathers, their weights and a dozen element-wise ops, and its
+//! backward two scatters; burn's CPU gather and scatter compute every index on one thread, a large
+//! part of the serial time of a training step (BENCHMARKS.md, "SegFormer and the training step
+//! against PyTorch"). [`linear_taps`] does one pass forward and one backward. Positions are
+//! constants: the gradient flows to the samples only (upstream detaches the disparity before the
+//! lookup).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

@@ -3,7 +3,9 @@
 //!
 //! Why: burn's CPU backend pools a 2-D map through its 3-D pooling kernel and a strided index
 //! iterator, forward and backward; the ConvGRU pools two hidden states at every iteration, which
-//! took 2 % of a MonSter++ pass and 6 % of a training step (BENCHMARKS.md).
+//! made it a visible share of a MonSter++ pass and of a training step (BENCHMARKS.md, "MonSter++
+//! against PyTorch, and where the time goes" and "SegFormer and the training step against
+//! PyTorch").
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

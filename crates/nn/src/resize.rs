@@ -6,11 +6,12 @@
 //! needs another route: a tensor that takes part in an autodiff graph is resized axis by axis as
 //! `x[i0]·(1 − λ) + x[i1]·λ` with two `select`s, whose backward (a scatter-add) every backend
 //! has. On the CPU device a plain-buffer kernel ([`resize_bilinear_planes`]) runs instead: burn's
-//! took 4 % of a MonSter++ pass (the ConvGRU resizes its hidden states at every iteration), and
-//! in training it is a burn operation whose backward is its adjoint
-//! ([`resize_bilinear_planes_grad`]), where burn's single-threaded backward took 8 % of a
-//! training step. Other tensors keep burn's kernel. All follow PyTorch's source-index rules, so
-//! they agree to float rounding (`tests/resize.rs`).
+//! was a visible share of a MonSter++ pass (the ConvGRU resizes its hidden states at every
+//! iteration), and in training it is a burn operation whose backward is its adjoint
+//! ([`resize_bilinear_planes_grad`]), where burn's backward ran on one thread (BENCHMARKS.md,
+//! "MonSter++ against PyTorch, and where the time goes" and "SegFormer and the training step
+//! against PyTorch"). Other tensors keep burn's kernel. All follow PyTorch's source-index rules,
+//! so they agree to float rounding (`tests/resize.rs`).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

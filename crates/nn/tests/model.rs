@@ -19,13 +19,10 @@ use safetensors::{Dtype, SafeTensors};
 const FIX: &str = "fixtures/monsterpp-tiny";
 const ITERS: usize = 8;
 
-fn weights() -> PathBuf {
-    support::fixture_dir(FIX).join("weights.safetensors")
-}
-
 fn tiny_loaded(device: &Device) -> Monster {
     let mut model = Monster::new(&MonsterConfig::tiny(), device);
-    let report = load_weights(&mut model, weights()).unwrap_or_else(|e| panic!("{e}"));
+    let report =
+        load_weights(&mut model, support::fixture_weights(FIX)).unwrap_or_else(|e| panic!("{e}"));
     assert!(report.is_complete(), "{report}");
     assert!(
         report.unexpected.is_empty(),
@@ -101,30 +98,13 @@ fn end_to_end_parity_train_mode() {
 
 // ---------------------------------------------------------------- key sets and counts
 
-/// (key → shape) of `state_dict_keys_<name>.txt`, without `num_batches_tracked`.
-fn listed_keys(name: &str) -> BTreeMap<String, Vec<usize>> {
-    let path = support::fixture_dir(FIX).join(format!("state_dict_keys_{name}.txt"));
-    let text = std::fs::read_to_string(&path).unwrap();
-    text.lines()
-        .filter_map(|line| {
-            let mut cols = line.split('\t');
-            let key = cols.next()?.trim();
-            let shape = cols.next()?.trim();
-            if key.ends_with("num_batches_tracked") {
-                return None;
-            }
-            Some((key.to_string(), serde_json::from_str(shape).unwrap()))
-        })
-        .collect()
-}
-
 /// Builds the model at a real config (lazy: nothing is allocated), compares the key sets and
 /// returns (total, trainable) parameters.
 fn check_keys(name: &str) -> (usize, usize) {
     let cfg = MonsterConfig::preset(name).unwrap();
     let model = Monster::new(&cfg, &Device::flex());
     let ours: BTreeMap<String, Vec<usize>> = module_keys(&model).into_iter().collect();
-    let theirs = listed_keys(name);
+    let theirs = support::listed_keys(FIX, &format!("state_dict_keys_{name}.txt"), "");
     let missing: Vec<_> = theirs.keys().filter(|k| !ours.contains_key(*k)).collect();
     let extra: Vec<_> = ours.keys().filter(|k| !theirs.contains_key(*k)).collect();
     let wrong: Vec<_> = theirs
@@ -193,12 +173,6 @@ fn param_count_tiny_matches_fixture_meta() {
 
 // ---------------------------------------------------------------- load errors
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nn-model-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 fn load_err(path: &PathBuf) -> (WeightsError, String) {
     let mut model = Monster::new(&MonsterConfig::tiny(), &Device::flex());
     let err = load_weights(&mut model, path).expect_err("the load must fail");
@@ -210,7 +184,7 @@ fn load_err(path: &PathBuf) -> (WeightsError, String) {
 #[test]
 fn missing_keys_are_an_error_naming_them() {
     testdata::require!(FIX);
-    let path = tmp("missing.safetensors");
+    let path = support::tmp("missing.safetensors");
     let gone = [
         "update_block_mix_mono.gru08.convq.weight",
         "REMP.RefinementBlock.conv3b.conv2.bn.running_var",
@@ -234,7 +208,7 @@ fn missing_keys_are_an_error_naming_them() {
 #[test]
 fn wrong_shapes_are_an_error_naming_them() {
     testdata::require!(FIX);
-    let path = tmp("shape.safetensors");
+    let path = support::tmp("shape.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| match n {
         // Halved output channels.
         "classifier.weight" => Some((
@@ -268,8 +242,8 @@ fn wrong_shapes_are_an_error_naming_them() {
 #[test]
 fn truncated_or_foreign_file_is_an_error_naming_it() {
     testdata::require!(FIX);
-    let bytes = std::fs::read(weights()).unwrap();
-    let path = tmp("truncated.safetensors");
+    let bytes = std::fs::read(support::fixture_weights(FIX)).unwrap();
+    let path = support::tmp("truncated.safetensors");
     std::fs::write(&path, &bytes[..bytes.len() - 1000]).unwrap();
     let (err, msg) = load_err(&path);
     assert!(matches!(err, WeightsError::Format { .. }), "{msg}");
@@ -278,12 +252,12 @@ fn truncated_or_foreign_file_is_an_error_naming_it() {
         "{msg}"
     );
 
-    let path = tmp("header-only.safetensors");
+    let path = support::tmp("header-only.safetensors");
     std::fs::write(&path, &bytes[..100]).unwrap();
     let (_, msg) = load_err(&path);
     assert!(msg.contains("header-only.safetensors"), "{msg}");
 
-    let (err, msg) = load_err(&tmp("does-not-exist.pth"));
+    let (err, msg) = load_err(&support::tmp("does-not-exist.pth"));
     assert!(matches!(err, WeightsError::Io { .. }), "{msg}");
     assert!(msg.contains("does-not-exist.pth"), "{msg}");
 }
@@ -293,7 +267,7 @@ fn truncated_or_foreign_file_is_an_error_naming_it() {
 #[test]
 fn safetensors_header_length_0x80_is_not_pickle() {
     let data = vec![0u8; 8];
-    let path = tmp("header-0x80.safetensors");
+    let path = support::tmp("header-0x80.safetensors");
     let bytes = (0..512)
         .map(|k| {
             let view = TensorView::new(Dtype::F32, vec![2], &data).unwrap();
@@ -312,7 +286,7 @@ fn safetensors_header_length_0x80_is_not_pickle() {
 #[test]
 fn wrong_config_is_an_error() {
     testdata::require!(FIX);
-    let path = tmp("other-config.safetensors");
+    let path = support::tmp("other-config.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         let deep = n
             .strip_prefix("mono_encoder.blocks.")
@@ -336,7 +310,7 @@ fn save_and_reload_gives_identical_output() {
     let fx = Fixture::load(FIX);
     let device = Device::flex();
     let model = tiny_loaded(&device);
-    let path = tmp("roundtrip.safetensors");
+    let path = support::tmp("roundtrip.safetensors");
     save_checkpoint(&model, &path).unwrap();
     let mut back = Monster::new(&MonsterConfig::tiny(), &device);
     let report = load_weights(&mut back, &path).unwrap_or_else(|e| panic!("{e}"));
@@ -350,7 +324,7 @@ fn save_and_reload_gives_identical_output() {
         .into_iter()
         .map(|(k, _)| k)
         .collect();
-    let want: Vec<String> = nn::weights::file_keys(weights())
+    let want: Vec<String> = nn::weights::file_keys(support::fixture_weights(FIX))
         .unwrap()
         .into_iter()
         .map(|(k, _)| k)
@@ -426,8 +400,8 @@ fn depth_anything_checkpoint_loads_into_the_mono_branch_and_the_dpt_copy() {
     testdata::require!(FIX);
     // A Depth Anything V2 checkpoint made from the fixture's mono branch: `pretrained.*` and
     // `depth_head.*` keys, nothing else.
-    let path = tmp("depth_anything.safetensors");
-    let bytes = std::fs::read(weights()).unwrap();
+    let path = support::tmp("depth_anything.safetensors");
+    let bytes = std::fs::read(support::fixture_weights(FIX)).unwrap();
     let st = SafeTensors::deserialize(&bytes).unwrap();
     let renamed: Vec<(String, TensorView)> = st
         .tensors()
@@ -453,7 +427,7 @@ fn depth_anything_checkpoint_loads_into_the_mono_branch_and_the_dpt_copy() {
         "the DPT copy leaves the output convolutions unused"
     );
     // The encoder holds the fixture's ViT weights, the DPT copy the depth head's.
-    let fixture = support::read_all(&weights());
+    let fixture = support::read_all(&support::fixture_weights(FIX));
     let value = |key: &str| fixture.iter().find(|(n, _, _)| n == key).unwrap().2.clone();
     let got = |t: Tensor<4>| t.into_data().try_into_vec::<f32>().unwrap();
     assert_eq!(

@@ -22,13 +22,10 @@ use support::{fixture_dir, max_abs_diff, Fixture};
 
 const FIX: &str = "fixtures/dinov3-tiny";
 
-fn weights_path() -> std::path::PathBuf {
-    fixture_dir(FIX).join("weights.safetensors")
-}
-
 fn tiny_model(fx: &Fixture) -> Dinov3Vit {
     let mut model = Dinov3Vit::new(&Dinov3Config::tiny(), &fx.device);
-    let report = load_dinov3(&mut model, &weights_path()).expect("fixture weights load");
+    let report =
+        load_dinov3(&mut model, &support::fixture_weights(FIX)).expect("fixture weights load");
     assert!(
         report.is_complete() && report.unexpected.is_empty(),
         "{report}"
@@ -215,10 +212,14 @@ fn warp_masks_and_uint8_inputs_match_the_reference() {
 fn similarity_from_the_images_end_to_end() {
     testdata::require!(FIX);
     let fx = Fixture::load(FIX);
-    let dino = Dinov3Features::from_file(&weights_path(), Dinov3Config::tiny(), fx.device.clone())
-        .unwrap()
-        .with_preprocess(fixture_preprocess())
-        .unwrap();
+    let dino = Dinov3Features::from_file(
+        &support::fixture_weights(FIX),
+        Dinov3Config::tiny(),
+        fx.device.clone(),
+    )
+    .unwrap()
+    .with_preprocess(fixture_preprocess())
+    .unwrap();
     let left = hwc(&fx, "input.left");
     let right = hwc(&fx, "input.right");
     let gt = hwc(&fx, "input.gt_disp");
@@ -274,21 +275,6 @@ fn processor_and_model_at_224() {
     );
 }
 
-/// (key → shape) of `state_dict_keys_<name>.txt`.
-fn listed_keys(name: &str) -> BTreeMap<String, Vec<usize>> {
-    let path = fixture_dir(FIX).join(format!("state_dict_keys_{name}.txt"));
-    std::fs::read_to_string(&path)
-        .unwrap()
-        .lines()
-        .filter_map(|line| {
-            let mut cols = line.split('\t');
-            let key = cols.next()?.trim().to_string();
-            let shape: Vec<usize> = serde_json::from_str(cols.next()?.trim()).unwrap();
-            Some((key, shape))
-        })
-        .collect()
-}
-
 #[test]
 fn presets_have_the_released_key_sets_and_sizes() {
     testdata::require!(FIX);
@@ -302,12 +288,16 @@ fn presets_have_the_released_key_sets_and_sizes() {
         assert_eq!(cfg.head_dim(), 64);
         let model = Dinov3Vit::new(&cfg, &device);
         let keys: BTreeMap<String, Vec<usize>> = hf_keys(&model).into_iter().collect();
-        assert_eq!(keys, listed_keys(name), "{name}: key set");
+        assert_eq!(
+            keys,
+            support::listed_keys(FIX, &format!("state_dict_keys_{name}.txt"), ""),
+            "{name}: key set"
+        );
         let n: usize = keys.values().map(|s| s.iter().product::<usize>()).sum();
         assert_eq!(n, count, "{name}: parameter count");
     }
     assert_eq!(
-        Dinov3Config::from_checkpoint(&weights_path()).unwrap(),
+        Dinov3Config::from_checkpoint(&support::fixture_weights(FIX)).unwrap(),
         Dinov3Config::tiny()
     );
     // The fixture's HF config (`meta.json["config_tiny"]`) read as a `config.json`.
@@ -329,9 +319,13 @@ fn wrong_or_damaged_checkpoints_are_reported_in_hf_names() {
     testdata::require!(FIX);
     let fx = Fixture::load(FIX);
     // A size mismatch (ViT-S on the tiny weights) names HF keys.
-    let err = Dinov3Features::from_file(&weights_path(), Dinov3Config::vits16(), fx.device.clone())
-        .err()
-        .expect("vits16 must not load the tiny weights");
+    let err = Dinov3Features::from_file(
+        &support::fixture_weights(FIX),
+        Dinov3Config::vits16(),
+        fx.device.clone(),
+    )
+    .err()
+    .expect("vits16 must not load the tiny weights");
     let text = err.to_string();
     assert!(text.contains("layer.0.mlp.up_proj.weight"), "{text}");
     assert!(text.contains("layer.11."), "{text}");
@@ -354,7 +348,7 @@ fn wrong_or_damaged_checkpoints_are_reported_in_hf_names() {
     }
     // A key the model does not have is an error too (strict loading).
     let extra = dir.join("extra.safetensors");
-    let bytes = std::fs::read(weights_path()).unwrap();
+    let bytes = std::fs::read(support::fixture_weights(FIX)).unwrap();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
     let norm = st.tensor("norm.weight").unwrap();
     let mut views: Vec<(String, safetensors::tensor::TensorView)> = st.tensors();
@@ -369,7 +363,7 @@ fn wrong_or_damaged_checkpoints_are_reported_in_hf_names() {
         other => panic!("expected a mismatch, got {other:?}"),
     }
     // A truncated file names the problem.
-    let mut cut = std::fs::read(weights_path()).unwrap();
+    let mut cut = std::fs::read(support::fixture_weights(FIX)).unwrap();
     cut.truncate(cut.len() / 2);
     let truncated = dir.join("truncated.safetensors");
     std::fs::write(&truncated, &cut).unwrap();

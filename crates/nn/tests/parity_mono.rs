@@ -44,17 +44,14 @@ fn check<const D: usize>(got: Tensor<D>, name: &str, rel_tol: f32) -> (f32, f32)
     (err, scale)
 }
 
-fn weights() -> std::path::PathBuf {
-    support::fixture_dir(FIX).join("weights.safetensors")
-}
-
 #[test]
 fn vit_matches_fixture() {
     testdata::require!(FIX);
     let device = Device::default();
     let cfg = MonsterConfig::tiny();
     let mut vit = DinoVisionTransformer::new(&cfg.vit, &device);
-    let report = load_submodule(&mut vit, weights(), "mono_encoder.").expect("load mono_encoder");
+    let report = load_submodule(&mut vit, support::fixture_weights(FIX), "mono_encoder.")
+        .expect("load mono_encoder");
     assert!(report.unexpected.is_empty(), "{report}");
 
     let x = mono_input(normalize_image(input("input.left", &device)));
@@ -80,12 +77,15 @@ fn dpt_heads_match_fixture() {
     let device = Device::default();
     let cfg = MonsterConfig::tiny();
     let mut vit = DinoVisionTransformer::new(&cfg.vit, &device);
-    load_submodule(&mut vit, weights(), "mono_encoder.").expect("load mono_encoder");
+    load_submodule(&mut vit, support::fixture_weights(FIX), "mono_encoder.")
+        .expect("load mono_encoder");
     let mut mono = DptHead::new(cfg.vit.embed_dim, &cfg.dpt, true, &device);
-    let r = load_submodule(&mut mono, weights(), "mono_decoder.").expect("load mono_decoder");
+    let r = load_submodule(&mut mono, support::fixture_weights(FIX), "mono_decoder.")
+        .expect("load mono_decoder");
     assert!(r.unexpected.is_empty(), "{r}");
     let mut feat = DptHead::new(cfg.vit.embed_dim, &cfg.dpt, false, &device);
-    let r = load_submodule(&mut feat, weights(), "feat_decoder.").expect("load feat_decoder");
+    let r = load_submodule(&mut feat, support::fixture_weights(FIX), "feat_decoder.")
+        .expect("load feat_decoder");
     assert!(r.unexpected.is_empty(), "{r}");
 
     let left = input("input.left", &device);

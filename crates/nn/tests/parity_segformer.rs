@@ -23,13 +23,9 @@ use support::Fixture;
 
 const FIX: &str = "fixtures/segformer-tiny";
 
-fn weights() -> PathBuf {
-    support::fixture_dir(FIX).join("weights.safetensors")
-}
-
 fn tiny_model(device: &Device) -> Segformer {
     let mut model = Segformer::new(&SegformerConfig::tiny(), device);
-    let report = model.load(weights()).unwrap();
+    let report = model.load(support::fixture_weights(FIX)).unwrap();
     assert!(report.unexpected.is_empty(), "{report}");
     assert_eq!(
         report.ignored,
@@ -236,7 +232,8 @@ fn segmenter_end_to_end_matches_where_the_classes_are_clear() {
     let fx = Fixture::load(FIX);
     let mut config = SegmenterConfig::with_model(SegformerConfig::tiny());
     config.input_size = (92, 76);
-    let segmenter = Segmenter::from_file(weights(), config, &fx.device).unwrap();
+    let segmenter =
+        Segmenter::from_file(support::fixture_weights(FIX), config, &fx.device).unwrap();
     let image = hwc_image(&fx, "input.image_u8");
     let seg = segmenter.segment(&image).unwrap();
     assert_eq!(seg.classes.size(), (96, 64));
@@ -298,30 +295,13 @@ fn synthetic_morphology_matches_scipy() {
     assert_eq!(dilated.count(), 1734);
 }
 
-/// (key → shape) of `state_dict_keys_mit-b2_9cls.txt`, `num_batches_tracked` excluded.
-fn listed_keys() -> BTreeMap<String, Vec<usize>> {
-    let path = support::fixture_dir(FIX).join("state_dict_keys_mit-b2_9cls.txt");
-    std::fs::read_to_string(&path)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let mut parts = l.split('\t');
-            let key = parts.next().unwrap().to_string();
-            let shape: Vec<usize> = serde_json::from_str(parts.next().unwrap()).unwrap();
-            (key, shape)
-        })
-        .filter(|(k, _)| !k.ends_with("num_batches_tracked"))
-        .collect()
-}
-
 #[test]
 fn mit_b2_key_set_shapes_and_parameter_count() {
     testdata::require!(FIX);
     let cfg = SegformerConfig::mit_b2(9);
     let model = Segformer::new(&cfg, &Device::flex());
     let keys: BTreeMap<String, Vec<usize>> = model.torch_keys().into_iter().collect();
-    let want = listed_keys();
+    let want = support::listed_keys(FIX, "state_dict_keys_mit-b2_9cls.txt", "");
     assert_eq!(want.len(), 379);
     let missing: Vec<_> = want.keys().filter(|k| !keys.contains_key(*k)).collect();
     let extra: Vec<_> = keys.keys().filter(|k| !want.contains_key(*k)).collect();
@@ -344,17 +324,11 @@ fn mit_b2_key_set_shapes_and_parameter_count() {
     );
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("seasonstereo-segformer-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 #[test]
 fn release_checkpoint_naming_loads_and_optimizer_state_is_dropped() {
     testdata::require!(FIX);
     // The release's `.pt` flattened: `model_state_dict.module.model.<HF key>`, plus optimizer state.
-    let bytes = std::fs::read(weights()).unwrap();
+    let bytes = std::fs::read(support::fixture_weights(FIX)).unwrap();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
     let mut views: Vec<(String, safetensors::tensor::TensorView)> = st
         .tensors()
@@ -363,7 +337,7 @@ fn release_checkpoint_naming_loads_and_optimizer_state_is_dropped() {
         .collect();
     let extra = st.tensor("decode_head.classifier.bias").unwrap();
     views.push(("optimizer_state_dict.state.0.exp_avg".into(), extra));
-    let wrapped = tmp("wrapped.safetensors");
+    let wrapped = support::tmp("wrapped.safetensors");
     std::fs::write(&wrapped, safetensors::serialize(views, None).unwrap()).unwrap();
 
     let device = Device::flex();
@@ -382,7 +356,7 @@ fn load_errors_name_the_keys() {
     testdata::require!(FIX);
     let device = Device::flex();
     // Missing tensor.
-    let path = tmp("missing.safetensors");
+    let path = support::tmp("missing.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         (n != "segformer.encoder.block.1.0.attention.self.sr.weight").then_some((s, b))
     });
@@ -396,14 +370,14 @@ fn load_errors_name_the_keys() {
     assert!(msg.contains("missing.safetensors"), "{msg}");
 
     // Unexpected key (a stray tensor) is an error for the strict loader.
-    let bytes = std::fs::read(weights()).unwrap();
+    let bytes = std::fs::read(support::fixture_weights(FIX)).unwrap();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
     let mut views: Vec<_> = st.tensors();
     views.push((
         "decode_head.extra.bias".into(),
         st.tensor("decode_head.classifier.bias").unwrap(),
     ));
-    let path2 = tmp("unexpected2.safetensors");
+    let path2 = support::tmp("unexpected2.safetensors");
     std::fs::write(&path2, safetensors::serialize(views, None).unwrap()).unwrap();
     let err = Segformer::new(&SegformerConfig::tiny(), &device)
         .load(&path2)
@@ -413,7 +387,7 @@ fn load_errors_name_the_keys() {
 
     // Wrong configuration: the tiny weights do not fit mit-b2.
     let msg = Segformer::new(&SegformerConfig::mit_b2(9), &device)
-        .load(weights())
+        .load(support::fixture_weights(FIX))
         .unwrap_err()
         .to_string();
     assert!(msg.contains("wrong shape"), "{msg}");
@@ -425,7 +399,8 @@ fn bad_images_are_rejected() {
     let fx = Fixture::load(FIX);
     let mut config = SegmenterConfig::with_model(SegformerConfig::tiny());
     config.input_size = (92, 76);
-    let segmenter = Segmenter::from_file(weights(), config, &fx.device).unwrap();
+    let segmenter =
+        Segmenter::from_file(support::fixture_weights(FIX), config, &fx.device).unwrap();
     let float_image = Image::filled(8, 8, 3, 0.5);
     let msg = segmenter.segment(&float_image).unwrap_err().to_string();
     assert!(msg.contains("8-bit"), "{msg}");
@@ -520,11 +495,12 @@ fn release_pt_checkpoint_loads() {
     testdata::require!(FIX);
     // The tiny weights as the release stores its checkpoint: a torch.save zip pickle with the
     // state dict under `model_state_dict`, keys carrying `module.` and `model.`.
-    let tensors: Vec<(String, Vec<usize>, Vec<f32>)> = support::read_all(&weights())
-        .into_iter()
-        .map(|(n, s, v)| (format!("module.model.{n}"), s, v))
-        .collect();
-    let path = tmp("openearthmap_segformer_tiny.pt");
+    let tensors: Vec<(String, Vec<usize>, Vec<f32>)> =
+        support::read_all(&support::fixture_weights(FIX))
+            .into_iter()
+            .map(|(n, s, v)| (format!("module.model.{n}"), s, v))
+            .collect();
+    let path = support::tmp("openearthmap_segformer_tiny.pt");
     torch_file::save(&path, "model_state_dict", &tensors);
 
     let fx = Fixture::load(FIX);
@@ -543,7 +519,7 @@ fn release_pt_checkpoint_loads() {
     assert!(err < 1e-4, "{err}");
 
     // A `.pt` without the expected wrapper is read as a bare state dict: every key is reported.
-    let bare = tmp("bare.pt");
+    let bare = support::tmp("bare.pt");
     torch_file::save(&bare, "weights", &tensors[..3]);
     let msg = Segformer::new(&SegformerConfig::tiny(), &fx.device)
         .load(&bare)

@@ -47,14 +47,10 @@ impl Fixture {
     }
 }
 
-fn weights_path() -> std::path::PathBuf {
-    support::fixture_dir(FIXTURE).join("weights.safetensors")
-}
-
 /// Loads a root-level group (field names = upstream root keys) with an empty prefix.
 fn load<M: Module>(mut m: M) -> M {
-    let report =
-        nn::weights::load_submodule(&mut m, weights_path(), "").unwrap_or_else(|e| panic!("{e}"));
+    let report = nn::weights::load_submodule(&mut m, support::fixture_weights(FIXTURE), "")
+        .unwrap_or_else(|e| panic!("{e}"));
     assert!(report.applied > 0);
     println!("loaded {} tensors", report.applied);
     m

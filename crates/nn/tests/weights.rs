@@ -20,25 +20,6 @@ use safetensors::SafeTensors;
 const FIX: &str = "fixtures/monsterpp-tiny";
 const PARTS: [&str; 3] = ["mono_encoder.", "mono_decoder.", "feat_decoder."];
 
-/// (key → shape) of `state_dict_keys_<name>.txt` under `prefix` (without num_batches_tracked).
-fn listed_keys(name: &str, prefix: &str) -> BTreeMap<String, Vec<usize>> {
-    let path = support::fixture_dir(FIX).join(format!("state_dict_keys_{name}.txt"));
-    let text = std::fs::read_to_string(&path).unwrap();
-    text.lines()
-        .filter_map(|line| {
-            let mut cols = line.split('\t');
-            let key = cols.next()?.trim();
-            let shape = cols.next()?.trim();
-            let rest = key.strip_prefix(prefix)?;
-            if rest.ends_with("num_batches_tracked") {
-                return None;
-            }
-            let shape: Vec<usize> = serde_json::from_str(shape).unwrap();
-            Some((rest.to_string(), shape))
-        })
-        .collect()
-}
-
 struct Parts {
     encoder: DinoVisionTransformer,
     mono: DptHead,
@@ -67,7 +48,7 @@ fn keys_of(parts: &Parts, prefix: &str) -> BTreeMap<String, Vec<usize>> {
 fn check_keys(name: &str, cfg: MonsterConfig) -> Parts {
     let parts = build(&cfg, &Device::default());
     for prefix in PARTS {
-        let want = listed_keys(name, prefix);
+        let want = support::listed_keys(FIX, &format!("state_dict_keys_{name}.txt"), prefix);
         let got = keys_of(&parts, prefix);
         assert!(!want.is_empty());
         let missing: Vec<_> = want.keys().filter(|k| !got.contains_key(*k)).collect();
@@ -155,12 +136,6 @@ fn config_validation() {
 
 // ---------------------------------------------------------------- error cases
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nn-weights-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 fn tiny_encoder() -> DinoVisionTransformer {
     DinoVisionTransformer::new(&MonsterConfig::tiny().vit, &Device::default())
 }
@@ -168,7 +143,7 @@ fn tiny_encoder() -> DinoVisionTransformer {
 #[test]
 fn missing_key_is_an_error_naming_it() {
     testdata::require!(FIX);
-    let path = tmp("missing.safetensors");
+    let path = support::tmp("missing.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         (n != "mono_encoder.blocks.3.attn.qkv.weight" && n != "mono_encoder.norm.weight")
             .then_some((s, b))
@@ -188,7 +163,7 @@ fn missing_key_is_an_error_naming_it() {
 #[test]
 fn wrong_shape_is_an_error_naming_it() {
     testdata::require!(FIX);
-    let path = tmp("shape.safetensors");
+    let path = support::tmp("shape.safetensors");
     support::write_edited_weights(FIX, &path, |n, s, b| {
         if n == "mono_encoder.blocks.0.mlp.fc1.bias" {
             let half = b.len() / 2;
@@ -222,7 +197,7 @@ fn unexpected_keys_are_reported_not_fatal() {
 fn truncated_file_is_an_error_naming_the_file() {
     testdata::require!(FIX);
     let bytes = std::fs::read(support::fixture_dir(FIX).join("weights.safetensors")).unwrap();
-    let path = tmp("truncated.safetensors");
+    let path = support::tmp("truncated.safetensors");
     std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
     let err = load_submodule(&mut tiny_encoder(), &path, "mono_encoder.").unwrap_err();
     let msg = err.to_string();
@@ -231,22 +206,25 @@ fn truncated_file_is_an_error_naming_the_file() {
         msg.contains("truncated.safetensors") && msg.contains("truncated"),
         "{msg}"
     );
-    let path = tmp("tiny.bin");
+    let path = support::tmp("tiny.bin");
     std::fs::write(&path, [1u8, 2, 3]).unwrap();
     let msg = load_weights(&mut tiny_encoder(), &path)
         .unwrap_err()
         .to_string();
     assert!(msg.contains("tiny.bin"), "{msg}");
-    let msg = load_weights(&mut tiny_encoder(), tmp("does-not-exist.safetensors"))
-        .unwrap_err()
-        .to_string();
+    let msg = load_weights(
+        &mut tiny_encoder(),
+        support::tmp("does-not-exist.safetensors"),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(msg.contains("does-not-exist.safetensors"), "{msg}");
 }
 
 #[test]
 fn module_prefix_and_wrapper_are_stripped() {
     testdata::require!(FIX);
-    let path = tmp("wrapped.safetensors");
+    let path = support::tmp("wrapped.safetensors");
     // `model.module.mono_encoder.*`, as a flattened `{'model': DataParallel state_dict}`.
     let bytes = std::fs::read(support::fixture_dir(FIX).join("weights.safetensors")).unwrap();
     let st = SafeTensors::deserialize(&bytes).unwrap();
@@ -275,7 +253,7 @@ fn checkpoint_round_trip() {
         "mono_encoder.",
     )
     .unwrap();
-    let path = tmp("ckpt.safetensors");
+    let path = support::tmp("ckpt.safetensors");
     save_checkpoint(&enc, &path).unwrap();
     save_checkpoint(&enc, &path).unwrap(); // overwrites
                                            // Saved in PyTorch naming (LayerNorm weight/bias, Linear [out, in]).

@@ -200,16 +200,19 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
 /// `reconstruct`'s hole filling distance, cells; the masks' heights fill their DSMs alike.
 pub const DEFAULT_FILL_CELLS: usize = 40;
 /// How far from a measured cell `reconstruct` invents heights, cells (8 m at 0.5 m): on the 45
-/// dev pairs the cells beyond were 10–20 m off on average, and leaving them empty lowered the
-/// MAE in every bin of date gap and baseline at no loss of cells within 1 m (BENCHMARKS.md).
+/// dev pairs the cells beyond were mostly far off, and leaving them empty lowered the MAE in
+/// nearly every bin of date gap and baseline at no loss of cells within 1 m (BENCHMARKS.md, "The
+/// filling stops 16 cells from the data").
 pub const DEFAULT_FILL_REACH: usize = 16;
 /// `reconstruct`'s median window after filling, cells (odd; 7.5 m at 0.5 m): one pair's DSM
 /// carries matching noise of a pixel of disparity and more, and on the 45 dev pairs a 15-cell
-/// window beat 7 and 11 in every bin of date gap and baseline (BENCHMARKS.md).
+/// window beat 7 and 11 in every bin of date gap and baseline (BENCHMARKS.md, "The DSM's median
+/// window: 15 cells, not 7").
 pub const DEFAULT_MEDIAN_CELLS: usize = 15;
 /// The median window of DSMs made from several pairs at once (`reconstruct-many`'s fused DSM,
 /// the masks' heights), cells: the pairs already average the matching noise, and a wider window
-/// only erodes structures (fused dev DSM: 0.850 m with 7 cells, 0.874 m with 15).
+/// only erodes structures (the fused dev DSM is worse with 15 cells than with 7: BENCHMARKS.md,
+/// "The DSM's median window: 15 cells, not 7").
 pub const FUSED_MEDIAN_CELLS: usize = 7;
 
 /// Suffix of `reconstruct`'s filled-cell sidecar, beside the DSM (`<stem>_filled.tif`).

@@ -84,9 +84,9 @@ pub const FULL_P2_PIXELS_PER_METRE: f64 = 1.0;
 /// Why: a jump of `k` pixels costs `P2` once, or `k · P1` as a ramp of one-pixel steps, and the
 /// matcher takes the cheaper. On a narrow baseline a roof edge is a jump of a few pixels only,
 /// so a `P2` chosen on wide baselines turns edges into ramps and small buildings into mounds.
-/// On the 10 dev pairs under 1 px/m, the square gave 1.463 m / 66.5 % within 1 m against
-/// 1.543 m / 63.3 % with a fixed `P2` (linear: 1.501 m / 65.3 %); at 1.1–2.5 px/m a lower `P2`
-/// is worse (BENCHMARKS.md).
+/// On the 10 dev pairs under 1 px/m the square did better than a fixed `P2` and than a linear
+/// scaling, in MAE and within 1 m; on the wider baselines a lower `P2` is worse (BENCHMARKS.md,
+/// "`P2` scaled to narrow baselines").
 pub fn baseline_p2(p: &SgmParams, pixels_per_metre: f64) -> u16 {
     if !pixels_per_metre.is_finite() {
         return p.p2;

@@ -169,14 +169,16 @@ impl ReconstructSummary {
 }
 
 /// Residual vertical parallax above which the cameras are suspect, pixels (s2p corrects up to a
-/// few pixels of pointing error; bundle-adjusted RPCs leave a fraction of a pixel). Measured on
-/// the 45 JAX_068 dev pairs (BA cameras): 0 or 2 px with each image's camera (38 measured),
-/// 4–22 px with the cameras swapped (17 measured).
+/// few pixels of pointing error; bundle-adjusted RPCs leave a fraction of a pixel). On the 45
+/// JAX_068 dev pairs (BA cameras) the threshold separates every pair with each image's camera
+/// from every pair with the cameras swapped, where the parallax could be measured
+/// (BENCHMARKS.md, "Images as delivered", "Swapped cameras").
 pub const MAX_VERTICAL_PARALLAX: f32 = 3.0;
 
 /// Share of matched rectified pixels under which a pair whose row offset could not be measured
-/// is suspect: on the 45 dev pairs 0.20–0.81 with each image's camera, at most 0.09 with the
-/// cameras swapped where the offset could not be measured (28 pairs).
+/// is suspect: on the 45 dev pairs it separates every pair with each image's camera from every
+/// pair with the cameras swapped whose offset could not be measured (BENCHMARKS.md, "Images as
+/// delivered", "Swapped cameras").
 pub const MIN_MATCHED_SHARE: f64 = 0.10;
 
 /// What the tiles of a work folder were computed with (`scene.json`): a rerun with other

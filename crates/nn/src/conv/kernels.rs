@@ -23,8 +23,9 @@ const COLUMN_FLOATS: usize = 1 << 18;
 pub(super) const MIN_TAP_CHANNELS: usize = 16;
 
 /// Fewest 2×2 output tiles for which a 3×3 convolution runs as Winograd: on smaller maps its
-/// bands are too short for its GEMMs (MonSter++'s 1/16 ConvGRU at 8×8: 0.53 ms against 0.34 ms
-/// as tap GEMMs; at 16×16 Winograd is ahead, 1.4 against 1.8 ms).
+/// bands are too short for its GEMMs (MonSter++'s 1/16 ConvGRU at 8×8 runs faster as tap GEMMs;
+/// at 16×16 Winograd is ahead: BENCHMARKS.md, "SegFormer and the training step against
+/// PyTorch", the seventh session).
 const MIN_WINOGRAD_TILES: usize = 32;
 
 /// Convolution of `input` (`shape`, NCHW) with `weights` (`[co, ci, kh, kw]`), then

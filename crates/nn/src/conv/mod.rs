@@ -4,11 +4,11 @@
 //! transposed layers as one GEMM and a scatter; bias, an inference BatchNorm and the activation
 //! are applied while the output is written ([`conv2d_fused`], [`conv_transpose2d_fused`]).
 //!
-//! Why: burn's CPU convolution builds im2col tiles of 512 pixels, converts the input to NHWC
-//! and re-lays out the weights at every call, then BatchNorm and the activation each make
-//! another pass; on MonSter++ that ran at about a third of the GEMM's speed (BENCHMARKS.md,
-//! "Where the time goes"). Everything these kernels do not cover (other devices, autodiff,
-//! groups, `Same` padding) keeps burn's layers, so the functions here are drop-ins for
+//! Why: burn's CPU convolution builds im2col tiles of 512 pixels, converts the input to NHWC and
+//! re-lays out the weights at every call, then BatchNorm and the activation each make another pass;
+//! on MonSter++ that ran well below the GEMM's own speed (BENCHMARKS.md, "MonSter++ against
+//! PyTorch, and where the time goes"). Everything these kernels do not cover (other devices,
+//! autodiff, groups, `Same` padding) keeps burn's layers, so the functions here are drop-ins for
 //! `forward`.
 
 mod epilogue;

@@ -1,10 +1,10 @@
 //! The convolution kernels as a burn backend operation, so that training on the CPU runs them
 //! too, forward and backward.
 //!
-//! Why: under autodiff the layers fell back to burn's CPU convolution, whose forward (im2col
-//! tiles, NHWC conversions, fresh buffers) and backward (a transposed convolution for the input,
-//! another im2col pass for the weight) made two-thirds of a MonSter++ training step
-//! (BENCHMARKS.md, "Training step"). [`conv2d`] is a burn extension operation (`Flex`, and
+//! Why: under autodiff the layers fell back to burn's CPU convolution, whose forward (im2col tiles,
+//! NHWC conversions, fresh buffers) and backward (a transposed convolution for the input, another
+//! im2col pass for the weight) made most of a MonSter++ training step (BENCHMARKS.md, "SegFormer
+//! and the training step against PyTorch"). [`conv2d`] is a burn extension operation (`Flex`, and
 //! `Autodiff<Flex>` with a hand-written backward on [`super::gradients`]); other dtypes fall back
 //! to burn's own convolution and its gradients.
 

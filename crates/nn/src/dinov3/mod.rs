@@ -54,9 +54,8 @@
 //! eager reference on this fixture), so real upstream scores can differ from this port by more
 //! than the table shows; 1e-5 on the score is the realistic expectation (design note B.5).
 //!
-//! Speed (random weights, `cargo run --release -p nn --example dinov3_forward`, 2 shared cores):
-//! one ViT-S/16 forward of the score's batch of 2 at 224² ≈ 0.6 s (batch 1 ≈ 0.3 s); ViT-L/16,
-//! the upstream default, batch 2 ≈ 6 s.
+//! Speed (random weights, `cargo run --release -p nn --example dinov3_forward`): BENCHMARKS.md,
+//! "DINOv3 and SegFormer"; ViT-L/16, the upstream default, is much slower than ViT-S/16.
 //!
 //! Not ported: the `--dinov3_repo_path` mode (original facebookresearch checkpoints, no resize
 //! and no normalisation) and gated-MLP models (ViT-7B/H+).

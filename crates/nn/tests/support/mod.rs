@@ -3,9 +3,8 @@
 
 pub mod tiny;
 
+use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
-
-use std::collections::HashMap;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use safetensors::{Dtype, SafeTensors};
@@ -14,6 +13,37 @@ use safetensors::{Dtype, SafeTensors};
 /// started with `testdata::require!` of that set.
 pub fn fixture_dir(set: &str) -> PathBuf {
     testdata::checked(set)
+}
+
+/// The weights of a fixture set (`weights.safetensors`).
+pub fn fixture_weights(set: &str) -> PathBuf {
+    fixture_dir(set).join("weights.safetensors")
+}
+
+/// (key → shape) of a fixture's key list `file` (key, tab, JSON shape per line), for the keys
+/// under `prefix` with the prefix removed, without batch norms' `num_batches_tracked`.
+pub fn listed_keys(set: &str, file: &str, prefix: &str) -> BTreeMap<String, Vec<usize>> {
+    let path = fixture_dir(set).join(file);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines()
+        .filter_map(|line| {
+            let mut cols = line.split('\t');
+            let key = cols.next()?.trim().strip_prefix(prefix)?;
+            let shape: Vec<usize> = serde_json::from_str(cols.next()?.trim()).unwrap();
+            (!key.ends_with("num_batches_tracked")).then(|| (key.to_string(), shape))
+        })
+        .collect()
+}
+
+/// A path named `name` in a temporary folder of this test binary and process.
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "nn-{}-{}",
+        env!("CARGO_CRATE_NAME"),
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
 }
 
 /// All tensors of a safetensors file as (shape, f32 values); F16/BF16/F32 are converted, integer

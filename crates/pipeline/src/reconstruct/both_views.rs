@@ -5,7 +5,8 @@
 //! Why: under [`BOTH_VIEWS_PIXELS_PER_METRE`] a pixel of disparity is more than 1.6 m of
 //! height. The two views' matches have their own census windows, aggregation grid and
 //! sub-pixel errors, so their mean halves the noise, and a cell only one view measured is more
-//! often a mismatch than the ground-first fill is wrong (BENCHMARKS.md).
+//! often a mismatch than the ground-first fill is wrong (BENCHMARKS.md, "Both views on very
+//! narrow baselines").
 
 use anyhow::{Context, Result};
 use camera::{rasterize_window, rasterize_window_with, triangulate_disparity, GridWindow, Points};
@@ -19,11 +20,12 @@ use camera::rectify::Rectification;
 use matching::DisparityRange;
 
 /// Below this disparity per metre of altitude (raw pixels) the classical matcher measures a tile
-/// from both views. Measured on the dev pairs: all four under 0.63 px/m (0.20–0.62) gain, by
-/// 0.055 m and 2.2 points within 1 m on average; from 0.72 to 0.99 px/m three of six pairs lose
-/// 0.02–0.2 m, where more of the cells one view alone measured are real (wider occlusions). The
-/// procedural world's standard pair, at 0.65 px/m, loses too (exact cameras, synthetic texture:
-/// its single-view cells are right more often), so the line sits just under it.
+/// from both views. On the dev pairs every pair under the line gains in MAE and within 1 m; the
+/// next ones up gain within 1 m on average but half of them lose MAE, where more of the cells one
+/// view alone measured are real (wider occlusions). The procedural world's standard pair, just
+/// above the line, loses too (exact cameras, synthetic texture: its single-view cells are right
+/// more often), so the line sits just under it (BENCHMARKS.md, "Both views on very narrow
+/// baselines").
 pub const BOTH_VIEWS_PIXELS_PER_METRE: f64 = 0.63;
 
 /// Two views' heights of a cell further apart than this are a mismatch in one of them (1 m and

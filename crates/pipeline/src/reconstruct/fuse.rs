@@ -12,17 +12,17 @@
 //! hole filling. With equal weights and no confidence the strongest cluster is the one with most
 //! members and the medians are the plain ones.
 //!
-//! Why the confidence: a pair's cell is within 1 m of the truth for 37–60 % of the cells where
-//! the winner's margin over its rival is under 0.1 and 89–98 % where it is over 0.9 (the 12 dev
-//! pairs), so two confident pairs that agree deserve more trust than three hesitant ones
-//! (BENCHMARKS.md).
+//! Why the confidence: on every one of the 12 dev pairs, a cell is far more often within 1 m of
+//! the truth where the winner's margin over its rival is large than where it is small, so two
+//! confident pairs that agree deserve more trust than three hesitant ones (BENCHMARKS.md, "Many
+//! dates, one DSM", "Confidence-weighted fusion").
 //!
 //! Pair weights, when asked for, come from a first fusion with equal weights
 //! ([`Fused::agreement`]): the share of a pair's measured cells within the tolerance of the fused
 //! height, turned into a weight by [`pair_weight`]. Agreement is not correctness: pairs that
 //! share an image share its mismatches and agree with each other, and a narrow-baseline pair is
 //! noisy without being wrong, so the weights help on some sets and hurt on others
-//! (BENCHMARKS.md) and are off by default.
+//! (BENCHMARKS.md, "Many dates, one DSM", "Pair weights") and are off by default.
 //!
 //! Before fusing, each pair's DSM can be co-registered on a reference pair's ([`Shift`]: an
 //! integer shift by NCC and a vertical offset, the benchmark's registration between two DSMs,
@@ -45,9 +45,10 @@ use crate::progress::Progress;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct FusionParams {
     /// Two sorted heights further apart than this, metres, belong to different clusters (default
-    /// 0.5 m: on the dev set 0.25, 0.4, 0.5, 1, 1.5 m gave 0.82, 0.83, 0.85, 0.93, 0.96 m MAE; on
-    /// the procedural six-date world, whose baselines are narrower and pairs noisier, 0.3, 0.4,
-    /// 0.5 m gave 0.87, 0.76, 0.72 m).
+    /// 0.5 m: on the dev set wider clusters were worse and tighter ones traded coverage for MAE;
+    /// on the procedural six-date world, whose baselines are narrower and pairs noisier, 0.5 m
+    /// beat tighter ones. BENCHMARKS.md, "Many dates, one DSM" and "The procedural world on six
+    /// dates").
     pub tolerance: f32,
     /// Fewest members of the kept cluster for the cell to be trusted.
     pub min_support: usize,
@@ -201,9 +202,8 @@ impl Agreement {
 }
 
 /// The power of a pair's agreement that gives its weight. On the ten dev images (12 pairs,
-/// agreements 0.56–0.91, 0.5 m clusters) the powers 1, 2, 4, 8 gave 0.840, 0.837, 0.832,
-/// 0.824 m against 0.850 m with equal weights, within 1 m 83.0–83.2 % against 82.8 %
-/// (BENCHMARKS.md).
+/// 0.5 m clusters) every power tried beat equal weights and the higher powers did best
+/// (BENCHMARKS.md, "Many dates, one DSM", "Pair weights").
 pub const AGREEMENT_POWER: i32 = 8;
 
 /// A pair's weight from its agreement with the equal-weight fusion: `share^8`, never below

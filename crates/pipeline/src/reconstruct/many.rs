@@ -131,15 +131,12 @@ pub const DEFAULT_PAIRS: usize = 12;
 pub const MIN_CONFIDENCE_PER_PAIR: f32 = 0.1;
 
 /// The default least summed confidence of a kept cluster in a fusion of `pairs` DSMs: 0.1 a
-/// pair (1.2 for 12: about two pairs at the median confidence, 0.63 on the dev pairs, or three
+/// pair (1.2 for 12: about two pairs at the median confidence of the dev pairs, or three
 /// hesitant ones). More pairs mean more chance agreements, as for the count rule. Against that
-/// rule (ten dev images, unsheared pairs; MAE m / within 1 m %): 6 pairs 0.807 / 83.4 against 0.860 / 81.3,
-/// 8 pairs 0.817 / 83.2 against 0.886 / 80.9, 12 pairs 0.803 / 83.6 against 0.841 / 83.0,
-/// 16 pairs 0.823 / 83.3 against 0.871 / 82.8, 20 pairs 0.813 / 83.6 against 0.885 / 82.8; the
-/// six-date world at 384² and 512², 12 pairs 0.59 / 90.6 and 0.55 / 91.7 against 0.73 / 89.3
-/// and 0.56 / 91.3, 6 pairs 0.66 / 89.5 and 0.63 / 91.1 against 0.81 / 87.1 and 0.66 / 90.6
-/// (BENCHMARKS.md). A fixed sum is not right for every count: 1.25 with 6 pairs gives 0.89 m
-/// on the world.
+/// rule it did better at every number of pairs tried, on the ten dev images and on the six-date
+/// world at both sizes, and kept the fused DSM's quality nearly independent of the number of
+/// pairs; a fixed sum is not right for every count (too strict for few pairs on the world)
+/// (BENCHMARKS.md, "Many dates, one DSM", "Confidence-weighted fusion").
 pub fn auto_min_confidence(pairs: usize) -> f32 {
     MIN_CONFIDENCE_PER_PAIR * pairs as f32
 }
@@ -622,8 +619,9 @@ fn fusion_params(opts: &ReconstructManyOptions, pairs: usize, confident: bool) -
 
 /// The default agreement of a fusion of `pairs` DSMs without confidence: at least 2 pairs (a height that only one
 /// pair measured is too often a mismatch), a quarter of them from 12 pairs on, never more than
-/// there are pairs. On the dev set (12 pairs, 1 m clusters) 1, 2, 3, 4 agreeing pairs gave 1.42,
-/// 1.05, 0.93, 0.87 m at 99.4, 99.2, 98.8, 97.7 % coverage (BENCHMARKS.md).
+/// there are pairs. On the dev set each further agreeing pair asked for, up to four, lowered the
+/// MAE at a small cost in coverage (BENCHMARKS.md, "Many dates, one DSM", the fusion variants
+/// measured with the count rule).
 pub fn auto_min_support(pairs: usize) -> usize {
     (pairs.div_ceil(4)).max(2).min(pairs.max(1))
 }
@@ -672,10 +670,10 @@ fn pair_options(
     // The cameras were adjusted all together (or are used as given).
     o.adjust_pointing = false;
     // The pairs level the ground as `reconstruct` does (the right image sheared): they measure
-    // more cells, which the confidence rule turns into a gain (ten dev images: 0.807 m / 99.1 %
-    // / 84.0 % within 1 m against 0.803 m / 98.8 % / 83.6 % unsheared; the count rule lost with
-    // them, 0.878 m / 82.5 % against 0.841 m / 83.0 %). The procedural world's cameras have no
-    // tilt: unchanged there.
+    // more cells, which the confidence rule turns into a gain on the ten dev images (more
+    // coverage and more cells within 1 m than from unsheared pairs), where the count rule lost
+    // with them (BENCHMARKS.md, "The right image sheared to level the ground", "Not in
+    // `reconstruct-many`"). The procedural world's cameras have no tilt: unchanged there.
     o
 }
 

@@ -76,13 +76,13 @@ pub struct ReconstructOptions {
     /// `homography/`, `disparity/`, the layout `eval` reads).
     pub keep_intermediates: bool,
     /// Measure the tiles of very narrow baselines from both views and keep the cells they agree
-    /// on ([`super::both_views`]); `false` matches from the left view only (what
-    /// `reconstruct-many` does: there the other pairs play that part).
+    /// on ([`super::both_views`]); `false` matches from the left view only
+    /// (`--single-view`; `reconstruct-many` passes its own choice to each pair).
     pub both_views: bool,
     /// Shear the right rectified image so that one ground altitude has one disparity over a
-    /// tile ([`camera::rectify::Shear::Level`]): the search covers the altitude range alone. On
-    /// the 45 dev pairs it wins in every bin; `reconstruct-many` turns it off for its pairs,
-    /// whose fusion it does not help (BENCHMARKS.md).
+    /// tile ([`camera::rectify::Shear::Level`]): the search covers the altitude range alone. It
+    /// won in every bin of the dev pairs, and `reconstruct-many`'s pairs keep it (BENCHMARKS.md,
+    /// "The right image sheared to level the ground").
     pub level_ground: bool,
     /// Correct the relative pointing error of the pair from tie points (the right camera
     /// translated; [`super::pointing`]) and take the scene's altitudes from them when

@@ -75,8 +75,9 @@ pub fn needs_adjustment<'a>(cameras: impl IntoIterator<Item = &'a RpcModel>) -> 
 }
 
 /// A camera leaves its image's tie points at most this far after the correction, pixels, RMS:
-/// on the 45 dev pairs (vendor cameras) 0.24–1.08 px with each image's camera, 1.38–6.64 px with
-/// the right camera of another image of the area.
+/// on the 45 dev pairs (vendor cameras) the line separates every pair with each image's camera
+/// from every pair with the right camera of another image of the area (BENCHMARKS.md, "Images
+/// as delivered", "A camera that does not fit").
 pub const MAX_RESIDUAL_PX: f64 = 1.2;
 
 /// A camera that no translation makes fit its image: an error of its own, never taken for a

@@ -134,9 +134,10 @@ pub fn tile_rectification(scene: &Scene, tile: &Tile) -> Result<Rectification> {
 
 /// Below this disparity per metre of altitude (one pixel is more than 2.5 m of height) the
 /// classical matcher works on a frame stretched [`NARROW_STRETCH`] times along the rows, so that
-/// its integer winners and sub-pixel fit come in half-pixel steps. Measured on the 45 dev pairs
-/// (BENCHMARKS.md): it lowers the filled DSM's MAE on both pairs under 0.25 px/m (by 0.11 m) and
-/// raises it on every pair from 0.48 px/m up, where the costlier search buys nothing.
+/// its integer winners and sub-pixel fit come in half-pixel steps. On the dev pairs it lowered
+/// the filled DSM's MAE on the two narrowest and did not help the next ones up, where the
+/// costlier search buys nothing; the line sits between them (BENCHMARKS.md, "Rows stretched 2×
+/// before matching on very narrow baselines").
 pub const NARROW_PIXELS_PER_METRE: f64 = 0.4;
 
 /// How many times a very narrow baseline's frame is stretched along the rows.

@@ -39,12 +39,7 @@ pub struct GeoRaster {
 impl GeoRaster {
     /// The metadata, to write another raster on the same grid with [`write_geotiff`].
     pub fn meta(&self) -> GeoTiffMeta {
-        GeoTiffMeta {
-            georef: self.georef.clone(),
-            nodata: self.nodata,
-            rpc: self.rpc.clone(),
-            gdal_metadata: None,
-        }
+        GeoTiffMeta::on_grid_of(&self.georef, self.nodata, &self.rpc)
     }
 }
 
@@ -57,6 +52,24 @@ pub struct GeoTiffMeta {
     /// GDAL's metadata (tag 42112, `<GDALMetadata>…</GDALMetadata>`): band descriptions, units
     /// and dataset items that GDAL, QGIS and rasterio show.
     pub gdal_metadata: Option<String>,
+}
+
+impl GeoTiffMeta {
+    /// The metadata of a new raster on another's grid, nodata and camera; not the other's GDAL
+    /// metadata, which describes its content (an acquisition date, what heights are), not the
+    /// new one's.
+    fn on_grid_of(
+        georef: &Option<GeoReference>,
+        nodata: Option<f64>,
+        rpc: &Option<RpcTag>,
+    ) -> Self {
+        GeoTiffMeta {
+            georef: georef.clone(),
+            nodata,
+            rpc: rpc.clone(),
+            gdal_metadata: None,
+        }
+    }
 }
 
 /// Where a raster lies: GDAL's affine geotransform and the coordinate system.
@@ -276,16 +289,9 @@ impl TiffReader {
         self.layout.bands
     }
 
-    /// The metadata, to write another raster on the same grid with [`write_geotiff`]; not
-    /// GDAL's metadata, which describes this file's content (an acquisition date, what heights
-    /// are), not the new one's.
+    /// The metadata, to write another raster on the same grid with [`write_geotiff`].
     pub fn meta(&self) -> GeoTiffMeta {
-        GeoTiffMeta {
-            georef: self.georef.clone(),
-            nodata: self.nodata,
-            rpc: self.rpc.clone(),
-            gdal_metadata: None,
-        }
+        GeoTiffMeta::on_grid_of(&self.georef, self.nodata, &self.rpc)
     }
 
     /// The `width × height` window at `(x0, y0)` as `(H, W, C)` f32; it must lie inside the

@@ -36,7 +36,8 @@ pub struct AblationOptions {
 }
 
 impl AblationOptions {
-    /// The defaults `seasonstereo demo --ablation` uses: about 10 minutes on 2 cores.
+    /// The defaults `seasonstereo demo --ablation` uses: minutes on 2 cores, not hours
+    /// (BENCHMARKS.md, "Whole commands").
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
         AblationOptions {
             out_dir: out_dir.into(),

@@ -12,7 +12,7 @@
 //! - water (decided first: water can be green) = low ∧ (dark ∧ smooth, or blue): filled height
 //!   < 1 m and either mean brightness 15×15 < 0.16 with local std 15×15 < 0.03, or the 7×7 mean
 //!   of the blue chroma `(B − R)/(R + G + B)` > 0.25 with mean brightness < 0.3 (clear water
-//!   is blue; shadows on WorldView-3 are bluish too, but stay below 0.25 on 99.9 % of the
+//!   is blue; shadows on WorldView-3 are bluish too, but stay below 0.25 on nearly all of the
 //!   JAX_068 pixels, winter 006 included), in components the release's clean-up keeps (none on
 //!   the JAX_068 images, which have no water; see BENCHMARKS.md for the procedural world);
 //! - classes (OpenEarthMap ids): 5 tree, 8 building, 6 water, 2 rangeland (vegetation at ground

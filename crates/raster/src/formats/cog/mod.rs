@@ -57,6 +57,18 @@ mod tests {
     use super::*;
     use crate::formats::{read_tiff, GeoReference};
 
+    /// A 0.5 m UTM grid (zone 17N) with NaN as nodata.
+    fn utm_meta() -> GeoTiffMeta {
+        GeoTiffMeta {
+            georef: Some(GeoReference::from_origin_utm(
+                435000.0, 3355000.0, 0.5, 32617,
+            )),
+            nodata: Some(f64::NAN),
+            rpc: None,
+            gdal_metadata: None,
+        }
+    }
+
     #[test]
     fn a_cog_reads_back_exactly_with_its_georeference() {
         let dir = tempfile::tempdir().unwrap();
@@ -64,14 +76,7 @@ mod tests {
         let (w, h) = (600, 300);
         let mut img = Image::from_fn(w, h, |x, y| (x as f32) * 0.5 - (y as f32) * 0.25);
         img.set(7, 3, 0, f32::NAN);
-        let meta = GeoTiffMeta {
-            georef: Some(GeoReference::from_origin_utm(
-                435000.0, 3355000.0, 0.5, 32617,
-            )),
-            nodata: Some(f64::NAN),
-            rpc: None,
-            gdal_metadata: None,
-        };
+        let meta = utm_meta();
         write_cog(&path, &img, &meta).unwrap();
         let back = read_tiff(&path).unwrap();
         assert_eq!(back.image.size(), (w, h));
@@ -156,14 +161,7 @@ mod tests {
     #[test]
     fn rows_written_in_blocks_make_the_same_file_as_the_whole_image() {
         let dir = tempfile::tempdir().unwrap();
-        let meta = GeoTiffMeta {
-            georef: Some(GeoReference::from_origin_utm(
-                435000.0, 3355000.0, 0.5, 32617,
-            )),
-            nodata: Some(f64::NAN),
-            rpc: None,
-            gdal_metadata: None,
-        };
+        let meta = utm_meta();
         for (w, h, bands) in [
             (1, 1, 1),
             (300, 7, 1),
