@@ -10,10 +10,10 @@ use clap::{Args, ValueEnum};
 use dataset::Shard;
 use matching::SgmParams;
 use nn::device::DeviceChoice;
-use pipeline::dsm::GridChoice;
-use pipeline::flags::{census_window, format_census, ClassicalFlags};
-use pipeline::matcher::{Matcher, MonsterOptions};
-use pipeline::stage::BatchSummary;
+use reconstruct::dsm::GridChoice;
+use reconstruct::flags::{census_window, format_census, ClassicalFlags};
+use workflow::matcher::{Matcher, MonsterOptions};
+use workflow::stage::BatchSummary;
 
 /// The classical matcher: census costs aggregated by MGM or SGM, then the left-right check,
 /// uniqueness, median and speckle filters.
@@ -347,22 +347,22 @@ pub fn parse_resolution(s: &str) -> Result<f64, String> {
 pub struct TilingArgs {
     /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
     /// (an affine rectification holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = pipeline::reconstruct::options::DEFAULT_TILE, value_parser = parse_tile)]
+    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_TILE, value_parser = parse_tile)]
     pub tile: usize,
     /// Overlap collar around each tile, pixels: context for the matcher; only the points of
     /// each tile's core are kept, so the collar never shows as a seam.
-    #[arg(long, value_name = "PX", default_value_t = pipeline::reconstruct::options::DEFAULT_COLLAR)]
+    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_COLLAR)]
     pub collar: usize,
     /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
     /// and only as many tiles as fit run at once (at most one per core).
-    #[arg(long, value_name = "GIB", default_value_t = pipeline::reconstruct::options::DEFAULT_MEMORY_GIB)]
+    #[arg(long, value_name = "GIB", default_value_t = reconstruct::options::DEFAULT_MEMORY_GIB)]
     pub max_memory: f64,
 }
 
 impl TilingArgs {
     /// The memory budget in bytes.
     pub fn max_memory_bytes(&self) -> Result<u64> {
-        pipeline::flags::memory_bytes(self.max_memory)
+        reconstruct::flags::memory_bytes(self.max_memory)
     }
 }
 
@@ -375,7 +375,7 @@ pub struct GridArgs {
     /// Cell size in metres on the ground (without --like; the grid covers the scene). In a CRS
     /// whose unit is not a ground metre (degrees, Web Mercator, feet) it is converted at the
     /// scene's centre; the log says the size in the CRS's unit.
-    #[arg(long, default_value_t = pipeline::flags::RESOLUTION, value_parser = parse_resolution)]
+    #[arg(long, default_value_t = reconstruct::flags::RESOLUTION, value_parser = parse_resolution)]
     pub resolution: f64,
     /// EPSG code of the DSM's CRS, projected or geographic: 32617 (UTM 17N), 4326
     /// (longitude/latitude), 3857 (Web Mercator), a national grid (without --like; default: the
@@ -388,7 +388,7 @@ pub struct GridArgs {
 impl GridArgs {
     /// The library's grid choice.
     pub fn choice(&self) -> GridChoice {
-        pipeline::flags::grid(self.like.clone(), self.resolution, None, self.epsg)
+        reconstruct::flags::grid(self.like.clone(), self.resolution, None, self.epsg)
     }
 }
 

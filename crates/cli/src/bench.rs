@@ -103,7 +103,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         None
     };
     let timing = Timing {
-        median: pipeline::eval::aggregate::median(&times).expect("at least one run"),
+        median: eval::aggregate::median(&times).expect("at least one run"),
         min: times.iter().copied().fold(f64::INFINITY, f64::min),
         peak_mib: train::metrics::peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64),
         warmup,

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Result;
-use pipeline::reconstruct::fabricated::fabricate_tiles;
-use pipeline::reconstruct::folder::TileFolder;
-use pipeline::reconstruct::merge::{merge_memory, merge_tiles, Finishing, MERGE_BLOCK_ROWS};
+use reconstruct::fabricated::fabricate_tiles;
+use reconstruct::folder::TileFolder;
+use reconstruct::merge::{merge_memory, merge_tiles, Finishing, MERGE_BLOCK_ROWS};
 
 /// Cells on each side of a fabricated tile (a 1024-pixel tile at about the images' resolution).
 const TILE_CELLS: usize = 1024;

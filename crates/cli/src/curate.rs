@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use pipeline::stages::curate::{self, features, ColourStatistic, CurateOptions, SsimScale};
-use pipeline::Progress;
+use stages::curate::{self, features, ColourStatistic, CurateOptions, SsimScale};
+use workflow::Progress;
 
 use crate::args::{report, DeviceArg, ShardArg};
 

@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use dataset::Subset;
-use pipeline::stages::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
-use pipeline::stages::world_training::{
+use stages::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
+use stages::world_training::{
     build_world_training, WorldTrainingOptions, WorldTrainingSummary,
 };
-use pipeline::Progress;
+use workflow::Progress;
 
 use crate::args::{SgmArgs, ShardArg};
 

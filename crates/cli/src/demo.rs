@@ -1,13 +1,13 @@
 //! `seasonstereo demo` and `demo --ablation`: arguments and what the terminal prints (the work is
-//! in `pipeline::demo`).
+//! in `demo`).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::demo::ablation::{run_ablation, AblationOptions};
-use pipeline::demo::{metres, percent, pixels, run_demo, DemoOptions};
-use pipeline::Progress;
+use demo::ablation::{run_ablation, AblationOptions};
+use demo::{metres, percent, pixels, run_demo, DemoOptions};
+use workflow::Progress;
 
 #[derive(Args)]
 pub struct DemoArgs {

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::dsm::{disparity_to_dsm, DsmOptions};
-use pipeline::flags;
+use reconstruct::dsm::{disparity_to_dsm, DsmOptions};
+use reconstruct::flags;
 
 #[derive(Args)]
 pub struct DsmArgs {

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use matching::Aggregation;
-use pipeline::eval::{evaluate, AoiRule, EvalOptions, Method};
-use pipeline::matcher::Matcher;
-use pipeline::Progress;
+use eval::{evaluate, AoiRule, EvalOptions, Method};
+use workflow::matcher::Matcher;
+use workflow::Progress;
 
 use crate::args::{NetworkArgs, SgmArgs};
 
@@ -34,9 +34,9 @@ pub struct EvalArgs {
     /// A test split NAME=DIR (repeat). Table 1's names: Jacksonville, "Buenos Aires",
     /// "Omaha Synch.", "Omaha Diach." (aliases jax, ba, omaha-sync, omaha-dia); other names get
     /// columns of their own. Omaha splits drop pairs whose true disparity exceeds the limit.
-    #[arg(long = "split", value_name = "NAME=DIR", value_parser = pipeline::eval::Split::parse,
+    #[arg(long = "split", value_name = "NAME=DIR", value_parser = eval::Split::parse,
           required_unless_present = "world")]
-    splits: Vec<pipeline::eval::Split>,
+    splits: Vec<eval::Split>,
     /// Evaluate a folder written by `seasonstereo world` (split "World", DIR/rpc, DIR/truth).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["splits", "rpc_dir", "truth_dir"])]
     world: Option<PathBuf>,
@@ -76,15 +76,15 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 1024)]
     crop: usize,
     /// Omaha pairs whose ground-truth disparity exceeds this are dropped, pixels.
-    #[arg(long, default_value_t = pipeline::eval::aggregate::OMAHA_MAX_DISPARITY)]
+    #[arg(long, default_value_t = eval::aggregate::OMAHA_MAX_DISPARITY)]
     omaha_max_disparity: f64,
     /// Scoring rules: `release` = the benchmark's released evaluator exactly (per-score
     /// registration on the masked truth, its NCC pyramid, _WATER.png 0 = water, truth nodata not
     /// masked); `robust` = one registration on the whole truth, NaN for the truth's nodata, a
     /// centre-preferring NCC with a minimum overlap (rows named "<method> [robust]").
     #[arg(long, value_name = "release|robust", default_value = "release",
-          value_parser = pipeline::eval::Protocol::parse)]
-    protocol: pipeline::eval::Protocol,
+          value_parser = eval::Protocol::parse)]
+    protocol: eval::Protocol,
     #[command(flatten)]
     sgm: SgmArgs,
     #[command(flatten)]
@@ -160,7 +160,7 @@ impl EvalArgs {
         };
         match self.name {
             Some(n) => opts.method_name = n,
-            None if self.protocol != pipeline::eval::Protocol::Release => {
+            None if self.protocol != eval::Protocol::Release => {
                 opts.method_name = format!("{} [{}]", opts.method_name, self.protocol.name());
             }
             None => {}

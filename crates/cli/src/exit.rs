@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::sync::OnceLock;
 
-use pipeline::outputs::{check_output_file, Incomplete};
+use workflow::outputs::{check_output_file, Incomplete};
 
 /// The text of `--help` on exit codes.
 pub const EXIT_CODES_HELP: &str = "Exit codes: 0 all done; 1 error before any work (a missing \
@@ -69,7 +69,7 @@ pub fn exit_code(result: anyhow::Result<()>) -> ExitCode {
 
 /// The error chain as one line, a context already contained in its cause left out.
 pub fn message(e: &anyhow::Error) -> String {
-    pipeline::outputs::one_line(e)
+    workflow::outputs::one_line(e)
 }
 
 /// Clap's errors: help and version exit 0, a malformed command line 1 (2 means partial).
@@ -88,7 +88,7 @@ pub fn partial(what: &str, total: usize, failed: Vec<String>, retry: &str) -> an
         message: format!(
             "{} of {total} {what} failed ({}); the output holds the others: {retry}",
             failed.len(),
-            pipeline::outputs::first_names(&failed)
+            workflow::outputs::first_names(&failed)
         ),
         failed,
     }

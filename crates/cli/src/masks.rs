@@ -5,11 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use pipeline::stages::masks::heights::PairIndex;
-use pipeline::stages::masks::{
+use stages::masks::heights::PairIndex;
+use stages::masks::{
     self, MasksOptions, MasksRecord, OfflineSegmenter, RulesSegmenter, SegformerSegmenter,
 };
-use pipeline::Progress;
+use workflow::Progress;
 
 use crate::args::{report, DeviceArg, ShardArg};
 

@@ -9,7 +9,7 @@ use seasonstereo::{
     reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, TileStatus,
 };
 
-use pipeline::flags;
+use reconstruct::flags;
 
 use crate::args::{
     parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs, ProductArgs,
@@ -116,18 +116,18 @@ pub struct ReconstructArgs {
     /// Fill the DSM's holes enclosed by data within this many cells (on both sides of the cell
     /// along a row, column or diagonal), ground first (the ground hidden behind buildings,
     /// unmatched patches); 0 leaves them empty, as the benchmark's protocol does.
-    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_CELLS)]
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_CELLS)]
     fill_holes: usize,
     /// Fill only the cells within this many cells of a measured height (along the filling's
     /// rays): the middle of a wider hole stays empty, because a height invented that far from
     /// any measurement is a guess (a courtyard at its roofs' height, a low roof at the ground's).
     /// The `_filled.tif` sidecar marks the filled cells either way.
-    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_FILL_REACH)]
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_REACH)]
     fill_reach: usize,
     /// Median filter of the DSM over this odd window of cells, after the filling: removes the
     /// roughness of single-pair matching on roofs and ground and keeps building edges (15 cells
     /// = 7.5 m at 0.5 m); 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::DEFAULT_MEDIAN_CELLS)]
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_MEDIAN_CELLS)]
     median_filter: usize,
     /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)
     /// with the benchmark's metric; needs --like on the same file.

@@ -91,7 +91,7 @@ pub struct ReconstructManyArgs {
     #[arg(long, value_name = "CELLS", default_value_t = 40)]
     fill_holes: usize,
     /// Median filter of the fused DSM over this odd window of cells; 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = pipeline::dsm::FUSED_MEDIAN_CELLS)]
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::FUSED_MEDIAN_CELLS)]
     median_filter: usize,
     /// Median filter of each pair's DSM before fusion (never fills a cell); 0 or 1 disables it.
     #[arg(long, value_name = "CELLS", default_value_t = 0)]
@@ -140,7 +140,7 @@ pub struct ReconstructManyArgs {
     matcher: MatcherArgs,
 }
 
-/// Runs the command: an error of [`pipeline::outputs::Incomplete`] when some pairs failed (exit 2) or none produced
+/// Runs the command: an error of [`workflow::outputs::Incomplete`] when some pairs failed (exit 2) or none produced
 /// a DSM (exit 3).
 pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     // Pairs of different sizes run one after the other: freed pages go back to the kernel after
@@ -220,9 +220,9 @@ impl ReconstructManyArgs {
         o.min_confidence = self.min_confidence;
         o.co_register = self.register;
         o.weight_pairs = self.pair_weights;
-        o.fill_holes = pipeline::flags::fill_cells(self.fill_holes);
-        o.median_filter = pipeline::flags::median_cells(self.median_filter);
-        o.pair_median_filter = pipeline::flags::median_cells(self.pair_median_filter);
+        o.fill_holes = reconstruct::flags::fill_cells(self.fill_holes);
+        o.median_filter = reconstruct::flags::median_cells(self.median_filter);
+        o.pair_median_filter = reconstruct::flags::median_cells(self.pair_median_filter);
         o.both_views = !self.single_view;
         o.truth = self.truth;
         o.alt_range = self.alt_range;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::Progress;
+use workflow::Progress;
 
 use crate::args::{parse_alt_range, parse_roi};
 
@@ -47,7 +47,7 @@ pub struct RectifyArgs {
 }
 
 pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
-    let opts = pipeline::rectify::RectifyOptions {
+    let opts = reconstruct::rectify::RectifyOptions {
         left: a.left,
         right: a.right,
         out_dir: a.output,
@@ -58,7 +58,7 @@ pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
         stem: a.stem,
     };
     opts.check_output()?;
-    let s = pipeline::rectify::rectify(&opts, progress)?;
+    let s = reconstruct::rectify::rectify(&opts, progress)?;
     let (lo, hi) = s.disparity_range;
     println!(
         "wrote pair {} ({}x{} px) to {}: disparity range {lo}:{hi} px for altitudes {}:{} m ({}, {:.3} px/m), rows aligned to {:.3} px",

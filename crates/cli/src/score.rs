@@ -73,7 +73,7 @@ pub struct ScoreArgs {
     truth: PathBuf,
     /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (Jacksonville), 15N (Omaha),
     /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
-    #[arg(long, value_name = "ZONE", value_parser = pipeline::flags::utm_zone)]
+    #[arg(long, value_name = "ZONE", value_parser = reconstruct::flags::utm_zone)]
     utm_zone: Option<camera::UtmZone>,
     /// Compare each DSM with this one (another method's DSM, cut onto the truth's grid) on the cells
     /// both cover and on those only one covers.
@@ -96,7 +96,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             .collect();
         crate::exit::guard_output("--json", j, &inputs)?;
     }
-    let zone = pipeline::score::truth_zone(&a.dsm[0], a.utm_zone)?;
+    let zone = eval::score::truth_zone(&a.dsm[0], a.utm_zone)?;
     let truth = read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {
@@ -109,7 +109,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         lines.push('\n');
     }
     if let Some(j) = &a.json {
-        pipeline::stage::write_text(j, &lines)?;
+        workflow::stage::write_text(j, &lines)?;
     }
     Ok(())
 }

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use pipeline::stages::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
-use pipeline::Progress;
+use stages::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
+use workflow::Progress;
 use synth::api::{GeminiConfig, GeminiGenerator};
 use synth::prompts::Prompts;
 use synth::{BuiltinSeasons, Season, SeasonGenerator};

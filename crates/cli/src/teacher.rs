@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::stages::teacher::{self, TeacherOptions};
-use pipeline::Progress;
+use stages::teacher::{self, TeacherOptions};
+use workflow::Progress;
 
 use crate::args::{parse_range, report, MatcherArgs, ShardArg};
 

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use pipeline::progress::track;
-use pipeline::Progress;
+use workflow::progress::track;
+use workflow::Progress;
 
 #[derive(Args)]
 pub struct WorldArgs {
@@ -55,9 +55,9 @@ pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
     })
     .map_err(anyhow::Error::msg)?;
     let name = a.name.unwrap_or_else(|| format!("WORLD_{}", a.seed));
-    let paths = pipeline::world_io::save_world(&world, &a.output, &name)?;
+    let paths = eval::world_io::save_world(&world, &a.output, &name)?;
     if a.raw {
-        let (l, r) = pipeline::world_io::save_raw_views(&world, &a.output, &name)?;
+        let (l, r) = eval::world_io::save_raw_views(&world, &a.output, &name)?;
         println!("raw views: {} {}", l.display(), r.display());
     }
     let (lo, hi) = world.disparity_range();
@@ -74,7 +74,7 @@ pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
 
 /// `--dates`: the multi-date stack.
 fn run_dates(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
-    use pipeline::world_dates::{write_dated_stack, ACQUISITIONS};
+    use eval::world_dates::{write_dated_stack, ACQUISITIONS};
     let name = a.name.unwrap_or_else(|| format!("WORLD_{}", a.seed));
     let stack = write_dated_stack(a.size, a.seed, &name, &ACQUISITIONS, &a.output, progress)?;
     for (path, acq) in stack.images.iter().zip(&ACQUISITIONS) {

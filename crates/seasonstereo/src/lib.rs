@@ -52,28 +52,29 @@ pub use camera::rectify::Roi;
 pub use camera::{read_dsm, Crs, DsmGrid, DsmRaster, Gridding, Heights, RpcModel, UtmZone};
 pub use dataset::Shard;
 pub use matching::SgmParams;
-pub use pipeline::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
-pub use pipeline::eval::metrics::DsmScores;
-pub use pipeline::eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
-pub use pipeline::jobs::{
+pub use reconstruct::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
+pub use eval::metrics::DsmScores;
+pub use eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
+pub use jobs::{
     ChainRequest, ChainStatus, ChainSubmitted, JobStatus, Resources, SlurmRequest, StageLine,
     StageStatus, Submitted, Units,
 };
 #[cfg(feature = "network")]
-pub use pipeline::matcher::MonsterOptions;
-pub use pipeline::matcher::{Matched, Matcher, RangeSource};
-pub use pipeline::outputs::Incomplete;
-pub use pipeline::reconstruct::fuse::{Agreement, FusionParams};
-pub use pipeline::reconstruct::many::{
+pub use workflow::matcher::MonsterOptions;
+pub use workflow::matcher::{Matched, Matcher, RangeSource};
+pub use workflow::outputs::Incomplete;
+pub use reconstruct::fuse::{Agreement, FusionParams};
+pub use reconstruct::many::{
     auto_min_confidence, auto_min_support, FusedOutcome, PairOutcome, PairStatus,
     ReconstructManyOptions, ReconstructManySummary, DEFAULT_PAIRS, MIN_CONFIDENCE_PER_PAIR,
 };
-pub use pipeline::reconstruct::select::{PairChoice, PairTerms, View};
-pub use pipeline::reconstruct::tile::{TileRecord, TileStatus};
-pub use pipeline::reconstruct::{ReconstructOptions, ReconstructSummary, ScenePlan};
-pub use pipeline::rectify::{RectifyOptions, RectifySummary};
-pub use pipeline::score::truth_zone;
-pub use pipeline::{flags, Progress, Silent};
+pub use reconstruct::select::{PairChoice, PairTerms, View};
+pub use reconstruct::tile::{TileRecord, TileStatus};
+pub use reconstruct::{ReconstructOptions, ReconstructSummary, ScenePlan};
+pub use reconstruct::rectify::{RectifyOptions, RectifySummary};
+pub use eval::score::truth_zone;
+pub use reconstruct::flags;
+pub use workflow::{Progress, Silent};
 pub use products::{OrthoBlend, Products, ProductsWritten};
 pub use raster::Image;
 
@@ -82,7 +83,7 @@ pub mod stages;
 /// The plan of a reconstruction without running it: the tiles, the DSM grid, every tile's
 /// estimated memory and the merge's. Nothing is written.
 pub fn plan_reconstruct(options: &ReconstructOptions) -> Result<ScenePlan> {
-    pipeline::reconstruct::plan(options)
+    reconstruct::plan(options)
 }
 
 /// Submits a reconstruction to Slurm: an array of tile tasks sized by the plan and a merge that
@@ -92,18 +93,18 @@ pub fn submit_slurm_reconstruct(
     options: &ReconstructOptions,
     request: &SlurmRequest,
 ) -> Result<Submitted> {
-    pipeline::jobs::submit_reconstruct(options, request)
+    jobs::submit_reconstruct(options, request)
 }
 
 /// The tiles of the submission in `work`: done, failed (with their errors), missing.
 pub fn job_status(work: &Path) -> Result<JobStatus> {
-    pipeline::jobs::status(work)
+    jobs::status(work)
 }
 
 /// Submits again only the array tasks of `work` whose tiles failed or are missing, and a merge
 /// after them; with `wait`, until the merge ends.
 pub fn resubmit_slurm(work: &Path, wait: bool) -> Result<Submitted> {
-    pipeline::jobs::resubmit(work, wait)
+    jobs::resubmit(work, wait)
 }
 
 /// Submits a chain of sharded stages to Slurm: one array job per stage, a check step after
@@ -111,31 +112,31 @@ pub fn resubmit_slurm(work: &Path, wait: bool) -> Result<Submitted> {
 /// `--kill-on-invalid-dep=yes`. Scripts, shard markers and `jobs/chain.json` go into the work
 /// folder.
 pub fn submit_slurm_chain(request: &ChainRequest) -> Result<ChainSubmitted> {
-    pipeline::jobs::submit_chain(request)
+    jobs::submit_chain(request)
 }
 
 /// The shards of every stage of the chain in `work`: done, failed (exit code, log), missing.
 pub fn chain_status(work: &Path) -> Result<ChainStatus> {
-    pipeline::jobs::chain_status(work)
+    jobs::chain_status(work)
 }
 
 /// Submits again the failed and missing shards of the chain's first unfinished stage and every
 /// later stage; with `wait`, until the last stage ends.
 pub fn resubmit_slurm_chain(work: &Path, wait: bool) -> Result<ChainSubmitted> {
-    pipeline::jobs::resubmit_chain(work, wait)
+    jobs::resubmit_chain(work, wait)
 }
 
 /// Rectifies a raw satellite pair from its RPC cameras (epipolar lines become rows) into the
 /// pair folder `options.out_dir` (`L/`, `R/`, `homography/`, `rectify/`), and gives the disparity
 /// search range that the scene's altitudes imply.
 pub fn rectify(options: &RectifyOptions, progress: &dyn Progress) -> Result<RectifySummary> {
-    pipeline::rectify::rectify(options, progress)
+    reconstruct::rectify::rectify(options, progress)
 }
 
 /// Reads a rectified pair (NPY `.iio`/`.npy`, TIFF, PNG, PFM), checking that both sides have the
 /// same size.
 pub fn read_pair(left: &Path, right: &Path) -> Result<(Image, Image)> {
-    pipeline::predict::read_pair(left, right)
+    workflow::predict::read_pair(left, right)
 }
 
 /// The disparity of the rectified pair `left`, `right` (NaN where invalid), by `matcher`: census +
@@ -153,13 +154,13 @@ pub fn predict(
 /// Writes a disparity; the extension picks the format: `.iio`/`.npy`, `.tif`, `.pfm` keep the
 /// values (NaN = invalid), `.png` writes a colour-mapped picture.
 pub fn write_disparity(path: &Path, disparity: &Image) -> Result<()> {
-    pipeline::predict::write_disparity(path, disparity)
+    workflow::predict::write_disparity(path, disparity)
 }
 
 /// Turns the disparity of a rectified pair into a georeferenced DSM: RPC triangulation (s2p's
 /// iteration), points gridded per cell, optional hole filling and median filter.
 pub fn dsm(options: &DsmOptions) -> Result<DsmSummary> {
-    pipeline::dsm::disparity_to_dsm(options)
+    reconstruct::dsm::disparity_to_dsm(options)
 }
 
 /// From a raw pair to a DSM at any scene size: tiles with collars, each rectified, matched,
@@ -169,7 +170,7 @@ pub fn reconstruct(
     options: &ReconstructOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructSummary> {
-    pipeline::reconstruct::reconstruct(options, progress)
+    reconstruct::reconstruct(options, progress)
 }
 
 /// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence, incidence
@@ -183,13 +184,13 @@ pub fn reconstruct_many(
     options: &ReconstructManyOptions,
     progress: &dyn Progress,
 ) -> Result<ReconstructManySummary> {
-    pipeline::reconstruct::many::reconstruct_many(options, progress)
+    reconstruct::many::reconstruct_many(options, progress)
 }
 
 /// Reads a ground truth `<AOI>_DSM.tif` (GeoTIFF, or DFC2019 plain TIFF + `<AOI>_DSM.txt` in
 /// UTM `zone`) with its `<AOI>_CLS.tif` and optional `<AOI>_WATER.png` beside it.
 pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
-    pipeline::score::read_truth(dsm, zone)
+    eval::score::read_truth(dsm, zone)
 }
 
 /// The benchmark's metric on a DSM (on the truth's grid, or on its own and cut onto the truth's
@@ -197,7 +198,7 @@ pub fn read_truth(dsm: &Path, zone: UtmZone) -> Result<Truth> {
 /// cells that maximises NCC, the vertical offset, MAE over the cells both have (raw, without
 /// water, without foliage and water) and the truth's coverage.
 pub fn score(dsm: &Path, truth: &Truth) -> Result<DsmScores> {
-    pipeline::score::score_dsm_file(dsm, truth)
+    eval::score::score_dsm_file(dsm, truth)
 }
 
 /// Two DSMs ("ours" and another method's, e.g. s2p's; each cut onto the truth's grid as in
@@ -207,20 +208,20 @@ pub fn score(dsm: &Path, truth: &Truth) -> Result<DsmScores> {
 /// and share of truth cells within 1 m and 2 m. Two MAEs over different cells do not rank two
 /// methods (holes fall where matching is hard); these do.
 pub fn score_against(dsm: &Path, other: &Path, truth: &Truth) -> Result<Versus> {
-    pipeline::score::score_versus_files(dsm, other, truth)
+    eval::score::score_versus_files(dsm, other, truth)
 }
 
 /// Altitude MAE of the DSMs from the disparities of one or more splits, exactly as the
 /// benchmark's code computes it; resumable (pairs already in the CSV are skipped) and writing
 /// the paper's Table 1.
 pub fn eval(options: &EvalOptions, progress: &dyn Progress) -> Result<EvalReport> {
-    pipeline::eval::evaluate(options, progress)
+    eval::evaluate(options, progress)
 }
 
 /// An error as one line, each cause once (a context already contained in its cause left out):
 /// what the command line prints after `error: `, and the text of the Python package's exceptions.
 pub fn error_line(e: &Error) -> String {
-    pipeline::outputs::one_line(e)
+    workflow::outputs::one_line(e)
 }
 
 /// The kind of the file-system failure behind `e` (a missing file, a denied permission), when

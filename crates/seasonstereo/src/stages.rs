@@ -9,25 +9,25 @@
 
 use crate::{Progress, Result};
 
-pub use pipeline::stage::BatchSummary;
-pub use pipeline::stages::curate::{CurateOptions, CurateSummary};
-pub use pipeline::stages::dataset_build::{BuildOptions, BuildSummary, MaskDirs};
-pub use pipeline::stages::masks::MasksOptions;
-pub use pipeline::stages::synthesize::{SynthesizeOptions, SynthesizeSummary};
-pub use pipeline::stages::teacher::TeacherOptions;
-pub use pipeline::stages::world_training::{WorldTrainingOptions, WorldTrainingSummary};
+pub use workflow::stage::BatchSummary;
+pub use stages::curate::{CurateOptions, CurateSummary};
+pub use stages::dataset_build::{BuildOptions, BuildSummary, MaskDirs};
+pub use stages::masks::MasksOptions;
+pub use stages::synthesize::{SynthesizeOptions, SynthesizeSummary};
+pub use stages::teacher::TeacherOptions;
+pub use stages::world_training::{WorldTrainingOptions, WorldTrainingSummary};
 pub use synth::SeasonGenerator;
 
 /// Teacher disparities (SGM, or MonSter++ with weights) for every real synchronic pair of
 /// `options.pairs_dir`: they supervise every synthetic combination of that pair.
 pub fn teacher(options: &TeacherOptions, progress: &dyn Progress) -> Result<BatchSummary> {
-    pipeline::stages::teacher::run_teacher(options, progress)
+    stages::teacher::run_teacher(options, progress)
 }
 
 /// Scores the consistency of the synchronic pairs (colour, SSIM, image features) and selects the
 /// intersection of the two top-K rankings.
 pub fn curate(options: &CurateOptions, progress: &dyn Progress) -> Result<CurateSummary> {
-    pipeline::stages::curate::run_curate(options, progress)
+    stages::curate::run_curate(options, progress)
 }
 
 /// Seasonal variants of every image of the selected pairs by `generator`, each checked for
@@ -37,18 +37,18 @@ pub fn synthesize(
     generator: &dyn SeasonGenerator,
     progress: &dyn Progress,
 ) -> Result<SynthesizeSummary> {
-    pipeline::stages::synthesize::run_synthesize(options, generator, progress)
+    stages::synthesize::run_synthesize(options, generator, progress)
 }
 
 /// Water, tree and building masks from one segmentation per image.
 pub fn masks(options: &MasksOptions, progress: &dyn Progress) -> Result<BatchSummary> {
-    pipeline::stages::masks::run_masks(options, progress)
+    stages::masks::run_masks(options, progress)
 }
 
 /// The training set in the layout the trainer reads: the season combinations of every pair,
 /// their masks, the subsets S1/S2/S3 and the manifest.
 pub fn dataset_build(options: &BuildOptions, progress: &dyn Progress) -> Result<BuildSummary> {
-    pipeline::stages::dataset_build::run_build(options, progress)
+    stages::dataset_build::run_build(options, progress)
 }
 
 /// A small training set from procedural worlds, built by the same stages as real data.
@@ -56,5 +56,5 @@ pub fn world_training(
     options: &WorldTrainingOptions,
     progress: &dyn Progress,
 ) -> Result<WorldTrainingSummary> {
-    pipeline::stages::world_training::build_world_training(options, progress)
+    stages::world_training::build_world_training(options, progress)
 }

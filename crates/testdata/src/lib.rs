@@ -77,6 +77,16 @@ pub fn checked(name: &str) -> PathBuf {
     })
 }
 
+/// The DFC2019 JAX_068 development data, which most real-data tests read.
+pub const JAX_DEV: &str = "data/dfc2019-jax068-dev";
+
+/// A file of the DFC2019 JAX_068 development data, read in place, for a test that started with
+/// `testdata::require!(testdata::JAX_DEV)`.
+#[track_caller]
+pub fn jax(relative: &str) -> PathBuf {
+    checked(JAX_DEV).join(relative)
+}
+
 /// `SEASONSTEREO_DATA` (relative to the repository root) when set and not empty, else
 /// `../shared` beside the repository.
 pub fn data_root() -> PathBuf {

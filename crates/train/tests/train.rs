@@ -1,5 +1,5 @@
 //! End-to-end training on a tiny procedural-world set (the release's layout, built by
-//! `pipeline::stages::world_training`): exact resume, initialisation from the MonSter++ fixture weights,
+//! `stages::world_training`): exact resume, initialisation from the MonSter++ fixture weights,
 //! the frozen mono branch, checkpoints, logs and the stop request.
 
 use std::path::{Path, PathBuf};
@@ -14,8 +14,8 @@ fn world_set() -> &'static Path {
     DIR.get_or_init(|| {
         let dir =
             std::env::temp_dir().join(format!("seasonstereo-train-tests-{}", std::process::id()));
-        let opts = pipeline::stages::world_training::WorldTrainingOptions::new(&dir, 128, 1, 1);
-        pipeline::stages::world_training::build_world_training(&opts, &pipeline::Silent)
+        let opts = stages::world_training::WorldTrainingOptions::new(&dir, 128, 1, 1);
+        stages::world_training::build_world_training(&opts, &workflow::Silent)
             .expect("world training set");
         dir
     })

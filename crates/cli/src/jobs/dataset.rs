@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use pipeline::jobs::script::{quote, split};
+use jobs::script::{quote, split};
 use seasonstereo::{chain_status, resubmit_slurm_chain, submit_slurm_chain, ChainRequest};
 use seasonstereo::{ChainStatus, ChainSubmitted, StageLine};
 
@@ -247,9 +247,9 @@ fn report(s: &ChainSubmitted, work: &Path) -> Result<()> {
     println!(
         "submitted from stage {} (array tasks {}): {}; scripts and logs in {}",
         s.first.0,
-        pipeline::jobs::status::array_spec(&s.first.1),
+        jobs::status::array_spec(&s.first.1),
         jobs.join(" "),
-        pipeline::jobs::record::jobs_dir(work).display()
+        jobs::record::jobs_dir(work).display()
     );
     let shown = quote(&work.display().to_string());
     println!("follow: seasonstereo jobs status --work {shown}");
@@ -270,7 +270,7 @@ fn outcome(code: i32, work: &Path) -> Result<()> {
         0 => Ok(()),
         c => bail!(
             "every shard finished but the finalize job exited {c}: see its log in {}",
-            pipeline::jobs::record::jobs_dir(work)
+            jobs::record::jobs_dir(work)
                 .join("logs")
                 .display()
         ),

@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use pipeline::jobs::script::{quote, split};
-use pipeline::outputs::Incomplete;
+use jobs::script::{quote, split};
+use workflow::outputs::Incomplete;
 use seasonstereo::{
     job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted,
 };
@@ -134,7 +134,7 @@ pub fn run(a: JobsArgs, parse: dataset::ParseLine) -> Result<()> {
     match a.command {
         JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(*r),
         JobsCommand::Slurm(SlurmCommand::Dataset(d)) => dataset::submit(*d, parse),
-        JobsCommand::Status(s) if pipeline::jobs::is_chain(&s.work.work) => {
+        JobsCommand::Status(s) if jobs::is_chain(&s.work.work) => {
             dataset::status(&s.work.work, s.stage.as_deref())
         }
         JobsCommand::Status(s) => match s.stage {
@@ -144,7 +144,7 @@ pub fn run(a: JobsArgs, parse: dataset::ParseLine) -> Result<()> {
             ),
             None => print_status(&job_status(&s.work.work)?),
         },
-        JobsCommand::Resubmit(r) if pipeline::jobs::is_chain(&r.work.work) => {
+        JobsCommand::Resubmit(r) if jobs::is_chain(&r.work.work) => {
             dataset::resubmit(&r.work.work, r.wait)
         }
         JobsCommand::Resubmit(r) => {
@@ -204,7 +204,7 @@ fn report(s: &Submitted, work: &Path) -> Result<()> {
          (afterany); scripts and logs in {}",
         r.tiles.len(),
         s.tiles_job,
-        pipeline::jobs::status::array_spec(&s.tasks),
+        jobs::status::array_spec(&s.tasks),
         r.tiles_per_task,
         s.merge_job,
         r.tiles_script.parent().unwrap_or(work).display()

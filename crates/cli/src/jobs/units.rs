@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use anyhow::Result;
-use pipeline::jobs::script::quote;
-use pipeline::outputs::Incomplete;
+use jobs::script::quote;
+use workflow::outputs::Incomplete;
 use seasonstereo::Units;
 
 /// One line per failed (with its error) and missing unit.
@@ -32,7 +32,7 @@ pub(super) fn incomplete(units: &Units, what: &str, work: &Path) -> Result<()> {
             "{} of {} {what} failed or missing ({}): resubmit them as above",
             names.len(),
             units.len(),
-            pipeline::outputs::first_names(&names)
+            workflow::outputs::first_names(&names)
         ),
         failed: names,
     }
