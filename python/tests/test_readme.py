@@ -1,11 +1,8 @@
 """The README's Python example runs as written (the data root and the output folder replaced by
-the tests' own, the figure drawn off screen)."""
+the tests' own)."""
 
 import os
 import re
-
-import numpy as np
-import pytest
 
 from conftest import REPOSITORY
 
@@ -17,9 +14,7 @@ def example() -> str:
     return blocks[0]
 
 
-def test_the_readme_example_draws_the_dsm(dev, tmp_path, monkeypatch):
-    matplotlib = pytest.importorskip("matplotlib")
-    matplotlib.use("Agg")
+def test_the_readme_example_writes_a_dsm(dev, tmp_path, monkeypatch):
     code = example()
     assert len(code.strip().splitlines()) <= 12
     code = code.replace('"../shared/data/dfc2019-jax068-dev"', repr(str(dev)))
@@ -27,4 +22,4 @@ def test_the_readme_example_draws_the_dsm(dev, tmp_path, monkeypatch):
     scope: dict = {}
     exec(compile(code, "README.md", "exec"), scope)
     assert os.path.isfile(tmp_path / "out/py/006-020.tif")
-    assert np.isfinite(scope["dsm"].array).mean() > 0.8
+    assert scope["summary"]["dsm"]["coverage"] > 0.5

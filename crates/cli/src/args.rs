@@ -1,5 +1,10 @@
 //! Arguments shared by several subcommands: the matcher (classical parameters, the network and
 //! its device), `--shard`, and the value parsers of ranges, regions and boxes.
+//!
+//! Help layout: a doc comment's first paragraph is the option's line in `-h` (one short
+//! sentence), the whole comment its entry in `--help`. Options are grouped under the headings of
+//! [`heading`]; the tuning knobs are `hide_short_help` (listed by `--help` only, under headings of
+//! their own).
 
 use std::path::PathBuf;
 
@@ -14,6 +19,31 @@ use reconstruct::dsm::GridChoice;
 use reconstruct::flags::{census_window, format_census, ClassicalFlags};
 use workflow::matcher::{Matcher, MonsterOptions};
 use workflow::stage::BatchSummary;
+
+/// The headings of the options in `-h` and `--help`. The first six group what most runs need
+/// (all that `reconstruct -h` shows); the others the tuning knobs, which `reconstruct -h` leaves
+/// to `--help` (a test checks both).
+pub mod heading {
+    pub const INPUTS: &str = "Inputs";
+    pub const OUTPUTS: &str = "Outputs";
+    pub const REGION: &str = "Region";
+    pub const QUALITY: &str = "Quality";
+    pub const PERFORMANCE: &str = "Performance";
+    pub const CLUSTER: &str = "Cluster";
+    /// The matcher, the network and the cameras' correction (`-h` shows the matcher's choice
+    /// in `predict`, `teacher` and `eval`; `reconstruct -h` none of it).
+    pub const MATCHING: &str = "Matching and network";
+    /// The classical matcher's parameters (`--help` only).
+    pub const CLASSICAL: &str = "Classical matcher tuning";
+    /// How points become heights, and their vertical reference (`--help` only).
+    pub const GRID: &str = "Grid and heights";
+    /// How `reconstruct-many` fuses the pairs' heights (`--help` only).
+    pub const FUSION: &str = "Fusion";
+    /// Hole filling and smoothing of the DSM (`--help` only).
+    pub const FINISHING: &str = "Finishing";
+    /// The orthoimage's colours and the kept intermediates (`--help` only).
+    pub const PRODUCTS: &str = "Products";
+}
 
 /// The classical matcher: census costs aggregated by MGM or SGM, then the left-right check,
 /// uniqueness, median and speckle filters.
@@ -63,7 +93,7 @@ impl From<GriddingArg> for camera::Gridding {
 #[derive(Args)]
 pub struct MatcherArgs {
     /// Classical matching method (when no --model is given).
-    #[arg(long, value_enum, default_value_t = Method::Mgm)]
+    #[arg(long, value_enum, default_value_t = Method::Mgm, help_heading = heading::MATCHING)]
     pub method: Method,
     #[command(flatten)]
     pub net: NetworkArgs,
@@ -83,38 +113,54 @@ impl MatcherArgs {
     }
 }
 
-/// The stereo network options shared by `predict` and `eval`.
+/// The stereo network options shared by `predict` and `eval`: `--model` and `--weights` show in
+/// `-h`, the network's tuning (and `--device`) only in `--help`.
 #[derive(Args)]
+#[command(mut_arg("device", |a| a.help_heading(heading::MATCHING).hide_short_help(true)))]
 pub struct NetworkArgs {
     /// Use a stereo network instead of the classical matcher.
-    #[arg(long, value_enum, requires = "weights")]
+    #[arg(long, value_enum, requires = "weights", help_heading = heading::MATCHING)]
     pub model: Option<Model>,
     /// Network weights: an upstream MonSter++ .pth checkpoint or safetensors.
-    #[arg(long, value_name = "FILE", requires = "model")]
+    #[arg(long, value_name = "FILE", requires = "model", help_heading = heading::MATCHING)]
     weights: Option<PathBuf>,
-    /// Network configuration matching the weights: vitl (released checkpoints), vitb, vits, tiny.
+    /// Network configuration matching the weights.
+    ///
+    /// vitl (the released checkpoints), vitb, vits or tiny.
     #[arg(long = "config", value_name = "PRESET", default_value = "vitl",
-          value_parser = ["vitl", "vitb", "vits", "tiny"])]
+          value_parser = ["vitl", "vitb", "vits", "tiny"],
+          help_heading = heading::MATCHING, hide_short_help = true)]
     net_config: String,
-    /// Refinement iterations of the network (≥ 7). Default: 32 (8 for tiny).
-    #[arg(long, value_name = "N")]
+    /// Refinement iterations of the network (≥ 7).
+    ///
+    /// Default: 32 (8 for tiny).
+    #[arg(long, value_name = "N", help_heading = heading::MATCHING, hide_short_help = true)]
     iters: Option<usize>,
-    /// Maximum disparity of the network, a multiple of 32, pixels. Default: 416 (64 for tiny).
-    #[arg(long, value_name = "PX")]
+    /// Maximum disparity of the network, pixels.
+    ///
+    /// A multiple of 32. Default: 416 (64 for tiny).
+    #[arg(long, value_name = "PX", help_heading = heading::MATCHING, hide_short_help = true)]
     max_disp: Option<usize>,
-    /// Input values for the network: as-is (0–255 data), percentile (2–98th percentile of each
-    /// image → 0–255, for uint16 imagery) or percentile:LO:HI.
+    /// Input values for the network.
+    ///
+    /// as-is (0–255 data), percentile (2–98th percentile of each image → 0–255, for uint16
+    /// imagery) or percentile:LO:HI.
     #[arg(long, value_name = "MODE", default_value = "as-is",
-          value_parser = nn::infer::Normalisation::parse)]
+          value_parser = nn::infer::Normalisation::parse,
+          help_heading = heading::MATCHING, hide_short_help = true)]
     normalise: nn::infer::Normalisation,
-    /// Peak memory of one network pass, GiB; larger pairs are cut into strips of rows.
-    #[arg(long, value_name = "GIB", default_value_t = 8.0)]
+    /// Peak memory of one network pass, GiB.
+    ///
+    /// Larger pairs are cut into strips of rows.
+    #[arg(long, value_name = "GIB", default_value_t = 8.0,
+          help_heading = heading::MATCHING, hide_short_help = true)]
     net_memory: f64,
     /// Cut the pair into strips of ROWS rows for the network, whatever the memory budget.
-    #[arg(long, value_name = "ROWS")]
+    #[arg(long, value_name = "ROWS", help_heading = heading::MATCHING, hide_short_help = true)]
     strip_rows: Option<usize>,
     /// Overlap of consecutive strips, rows (blended linearly).
-    #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP)]
+    #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP,
+          help_heading = heading::MATCHING, hide_short_help = true)]
     strip_overlap: usize,
     #[command(flatten)]
     pub device: DeviceArg,
@@ -155,42 +201,55 @@ impl NetworkArgs {
     }
 }
 
+/// The classical matcher's parameters: tuning knobs, listed by `--help` only.
 #[derive(Args)]
 pub struct SgmArgs {
     /// SGM penalty of ±1 px disparity changes (census bits).
-    #[arg(long, default_value_t = SgmParams::default().p1)]
+    #[arg(long, default_value_t = SgmParams::default().p1,
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     p1: u16,
-    /// SGM penalty of larger disparity jumps (census bits). `reconstruct` and `reconstruct-many`
-    /// scale it by the square of the disparity per metre of altitude on tiles under 1 px/m
-    /// (narrow baselines, where roof edges are jumps of a few pixels; each tile record says the
-    /// P2 it used).
-    #[arg(long, default_value_t = SgmParams::default().p2)]
+    /// SGM penalty of larger disparity jumps (census bits).
+    ///
+    /// `reconstruct` and `reconstruct-many` scale it by the square of the disparity per metre of
+    /// altitude on tiles under 1 px/m (narrow baselines, where roof edges are jumps of a few
+    /// pixels; each tile record says the P2 it used).
+    #[arg(long, default_value_t = SgmParams::default().p2,
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     p2: u16,
     /// Use 4 aggregation paths instead of 8 (faster, slightly less accurate).
-    #[arg(long)]
+    #[arg(long, help_heading = heading::CLASSICAL, hide_short_help = true)]
     four_paths: bool,
     /// Left-right consistency tolerance, pixels; 0 disables the check.
-    #[arg(long, default_value_t = SgmParams::default().lr_tolerance.unwrap_or(0.0))]
+    #[arg(long, default_value_t = SgmParams::default().lr_tolerance.unwrap_or(0.0),
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     lr_tolerance: f32,
-    /// Gradient adaptation of P2 (jumps are cheaper across intensity edges; smaller = stronger);
-    /// 0 keeps P2 constant.
-    #[arg(long, value_name = "K", default_value_t = SgmParams::default().p2_adaptive.unwrap_or(0.0))]
+    /// Gradient adaptation of P2; 0 keeps P2 constant.
+    ///
+    /// Jumps are cheaper across intensity edges; smaller = stronger.
+    #[arg(long, value_name = "K", default_value_t = SgmParams::default().p2_adaptive.unwrap_or(0.0),
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     p2_adaptive: f32,
     /// Census window WxH (odd sides, at most 65 pixels).
     #[arg(long, value_name = "WxH", value_parser = parse_census,
-          default_value_t = format_census(SgmParams::default().census))]
+          default_value_t = format_census(SgmParams::default().census),
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     census: String,
-    /// Uniqueness ratio: the best cost must beat the best one more than 1 px away by this share;
-    /// 0 disables the test.
-    #[arg(long, value_name = "U", default_value_t = SgmParams::default().uniqueness.unwrap_or(0.0))]
+    /// Uniqueness ratio; 0 disables the test.
+    ///
+    /// The best cost must beat the best one more than 1 px away by this share.
+    #[arg(long, value_name = "U", default_value_t = SgmParams::default().uniqueness.unwrap_or(0.0),
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     uniqueness: f32,
-    /// Speckle filter: connected regions of disparity smaller than this many pixels are removed
-    /// (they survive the left-right check on real pairs and dominate a highest-point DSM); 0
-    /// keeps them.
-    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(0, |s| s.min_area))]
+    /// Speckle filter: smallest region of disparity kept, pixels; 0 keeps every region.
+    ///
+    /// Connected regions of disparity smaller than this are removed: they survive the
+    /// left-right check on real pairs and dominate a highest-point DSM.
+    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(0, |s| s.min_area),
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     speckle: usize,
     /// Largest disparity step between neighbours of one speckle region, pixels.
-    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(1.0, |s| s.max_diff))]
+    #[arg(long, value_name = "PX", default_value_t = SgmParams::default().speckle.map_or(1.0, |s| s.max_diff),
+          help_heading = heading::CLASSICAL, hide_short_help = true)]
     speckle_diff: f32,
 }
 
@@ -272,18 +331,22 @@ pub fn parse_alt_range(s: &str) -> Result<(f64, f64), String> {
 /// `--shard i/n`, shared by the stages.
 #[derive(Args)]
 pub struct ShardArg {
-    /// Process only shard I of N (0 ≤ I < N): the items at positions ≡ I mod N of the sorted
-    /// list, for array jobs (Slurm: --shard $SLURM_ARRAY_TASK_ID/$N; Kubernetes indexed jobs:
-    /// --shard $JOB_COMPLETION_INDEX/$N). Default: everything.
-    #[arg(long, value_name = "I/N", default_value = "0/1")]
+    /// Process only shard I of N (0 ≤ I < N), for array jobs.
+    ///
+    /// The items at positions ≡ I mod N of the sorted list (Slurm: --shard
+    /// $SLURM_ARRAY_TASK_ID/$N; Kubernetes indexed jobs: --shard $JOB_COMPLETION_INDEX/$N).
+    /// Default: everything.
+    #[arg(long, value_name = "I/N", default_value = "0/1", help_heading = heading::CLUSTER)]
     pub shard: Shard,
 }
 
 /// `--device`, shared by the commands that run a network.
 #[derive(Args)]
 pub struct DeviceArg {
-    /// Where the network runs: auto (the best backend compiled in: cuda, then wgpu, then cpu),
-    /// cpu, wgpu or cuda (GPU backends need the build features `wgpu` / `cuda`).
+    /// Where the network runs.
+    ///
+    /// auto (the best backend compiled in: cuda, then wgpu, then cpu), cpu, wgpu or cuda (GPU
+    /// backends need the build features `wgpu` / `cuda`).
     #[arg(
         id = "device",
         long = "device",
@@ -345,17 +408,26 @@ pub fn parse_resolution(s: &str) -> Result<f64, String> {
 /// How a pair is cut into tiles and how many run at once.
 #[derive(Args)]
 pub struct TilingArgs {
-    /// Tile side, left raw pixels: each tile is rectified, matched and triangulated on its own
-    /// (an affine rectification holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_TILE, value_parser = parse_tile)]
+    /// Tile side, pixels of the left image.
+    ///
+    /// Each tile is rectified, matched and triangulated on its own (an affine rectification
+    /// holds only over a small area) and the tiles are merged.
+    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_TILE,
+          value_parser = parse_tile, help_heading = heading::PERFORMANCE)]
     pub tile: usize,
-    /// Overlap collar around each tile, pixels: context for the matcher; only the points of
-    /// each tile's core are kept, so the collar never shows as a seam.
-    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_COLLAR)]
+    /// Overlap collar around each tile, pixels.
+    ///
+    /// Context for the matcher: only the points of each tile's core are kept, so the collar
+    /// never shows as a seam.
+    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_COLLAR,
+          help_heading = heading::PERFORMANCE)]
     pub collar: usize,
-    /// Memory budget of the process, GiB: each tile's peak memory is estimated before it runs
-    /// and only as many tiles as fit run at once (at most one per core).
-    #[arg(long, value_name = "GIB", default_value_t = reconstruct::options::DEFAULT_MEMORY_GIB)]
+    /// Memory budget of the process, GiB.
+    ///
+    /// Each tile's peak memory is estimated before it runs and only as many tiles as fit run
+    /// at once (at most one per core).
+    #[arg(long, value_name = "GIB", default_value_t = reconstruct::options::DEFAULT_MEMORY_GIB,
+          help_heading = heading::PERFORMANCE)]
     pub max_memory: f64,
 }
 
@@ -369,19 +441,27 @@ impl TilingArgs {
 /// The DSM's grid: a reference DSM's, or a grid of a resolution over the scene in any CRS.
 #[derive(Args)]
 pub struct GridArgs {
-    /// Use the grid of this DSM (e.g. the ground truth; DFC2019 plain TIFF + .txt accepted).
-    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"])]
+    /// Use the grid of this DSM (e.g. the ground truth).
+    ///
+    /// Its origin, cell size, extent and CRS; a DFC2019 plain TIFF with its .txt georeference
+    /// is accepted.
+    #[arg(long, value_name = "DSM", conflicts_with_all = ["resolution", "epsg"],
+          help_heading = heading::REGION)]
     pub like: Option<PathBuf>,
-    /// Cell size in metres on the ground (without --like; the grid covers the scene). In a CRS
-    /// whose unit is not a ground metre (degrees, Web Mercator, feet) it is converted at the
-    /// scene's centre; the log says the size in the CRS's unit.
-    #[arg(long, default_value_t = reconstruct::flags::RESOLUTION, value_parser = parse_resolution)]
+    /// Cell size on the ground, metres.
+    ///
+    /// Without --like; the grid then covers the scene. In a CRS whose unit is not a ground metre
+    /// (degrees, Web Mercator, feet) it is converted at the scene's centre; the log says the
+    /// size in the CRS's unit.
+    #[arg(long, value_name = "M", default_value_t = reconstruct::flags::RESOLUTION,
+          value_parser = parse_resolution, help_heading = heading::REGION)]
     pub resolution: f64,
-    /// EPSG code of the DSM's CRS, projected or geographic: 32617 (UTM 17N), 4326
-    /// (longitude/latitude), 3857 (Web Mercator), a national grid (without --like; default: the
-    /// scene's UTM zone). Heights are above the WGS84 ellipsoid (the geoid with --heights
-    /// egm96) in any CRS.
-    #[arg(long)]
+    /// EPSG code of the DSM's CRS (default: the scene's UTM zone).
+    ///
+    /// Projected or geographic: 32617 (UTM 17N), 4326 (longitude/latitude), 3857 (Web
+    /// Mercator), a national grid; without --like. Heights are above the WGS84 ellipsoid (the
+    /// geoid with --heights egm96) in any CRS.
+    #[arg(long, value_name = "CODE", help_heading = heading::REGION)]
     pub epsg: Option<u32>,
 }
 
@@ -404,28 +484,37 @@ pub enum OrthoBlendArg {
 /// The products written beside the DSM.
 #[derive(Args)]
 pub struct ProductArgs {
-    /// Write a true orthoimage on the DSM's grid here: an RGB GeoTIFF (uint8, nodata 0) with the
-    /// DSM's georeference, each cell coloured from a view that sees it (occlusions found with
-    /// the DSM), so roofs sit on their footprints.
-    #[arg(long, value_name = "FILE.tif")]
+    /// Also write a true orthoimage on the DSM's grid here.
+    ///
+    /// An RGB GeoTIFF (uint8, nodata 0) with the DSM's georeference, each cell coloured from a
+    /// view that sees it (occlusions found with the DSM), so roofs sit on their footprints.
+    #[arg(long, value_name = "FILE.tif", help_heading = heading::OUTPUTS)]
     pub ortho: Option<PathBuf>,
     /// How the orthoimage picks a colour among the views (reconstruct-many: every image).
-    #[arg(long, value_enum, default_value_t = OrthoBlendArg::Nadir)]
+    #[arg(long, value_enum, default_value_t = OrthoBlendArg::Nadir,
+          help_heading = heading::PRODUCTS, hide_short_help = true)]
     pub ortho_blend: OrthoBlendArg,
-    /// Write a point cloud here, one point per measured cell (filled cells left out) at the
-    /// cell's centre in the DSM's CRS, coloured from the views: `.las` (LAS 1.2, EPSG in its
-    /// GeoTIFF keys), `.laz` (compressed) or `.ply` (binary, s2p's layout).
-    #[arg(long, value_name = "FILE")]
+    /// Also write a point cloud here: .las, .laz or .ply.
+    ///
+    /// One point per measured cell (filled cells left out) at the cell's centre in the DSM's
+    /// CRS, coloured from the views: `.las` (LAS 1.2, EPSG in its GeoTIFF keys), `.laz`
+    /// (compressed) or `.ply` (binary, s2p's layout).
+    #[arg(long, value_name = "FILE", help_heading = heading::OUTPUTS)]
     pub points: Option<PathBuf>,
-    /// Write a quicklook of the DSM here: a PNG of the heights in colour over a hillshade
-    /// (transparent where no height), at most 2048 pixels a side.
-    #[arg(long, value_name = "FILE.png")]
+    /// Also write a quicklook of the DSM here (PNG).
+    ///
+    /// The heights in colour over a hillshade (transparent where no height), at most 2048
+    /// pixels a side.
+    #[arg(long, value_name = "FILE.png", help_heading = heading::OUTPUTS)]
     pub preview: Option<PathBuf>,
-    /// Vertical reference of the DSM's heights: `ellipsoid` (WGS84, as the cameras give them)
-    /// or `egm96` (above the EGM96 geoid, ≈ mean sea level; computed from its degree-360
-    /// coefficients, nothing to download). --truth scores the ellipsoidal heights (the truth's),
-    /// before the conversion. The GeoTIFF's metadata says which.
-    #[arg(long, value_enum, default_value_t = HeightsArg::Ellipsoid)]
+    /// Vertical reference of the DSM's heights.
+    ///
+    /// `ellipsoid` (WGS84, as the cameras give them) or `egm96` (above the EGM96 geoid, ≈ mean
+    /// sea level; computed from its degree-360 coefficients, nothing to download). --truth
+    /// scores the ellipsoidal heights (the truth's), before the conversion. The GeoTIFF's
+    /// metadata says which.
+    #[arg(long, value_enum, default_value_t = HeightsArg::Ellipsoid,
+          help_heading = heading::GRID, hide_short_help = true)]
     pub heights: HeightsArg,
 }
 

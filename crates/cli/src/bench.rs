@@ -30,7 +30,7 @@ pub enum BenchWorkload {
 #[derive(Args)]
 #[command(
     after_help = "Examples:\n  seasonstereo bench monsterpp --config vits --height 256 \
-    --width 512 --iters 12 --max-disp 192 --runs 3 --json\n  seasonstereo bench segformer \
+    --width 512 \\\n      --iters 12 --max-disp 192 --runs 3 --json\n  seasonstereo bench segformer \
     --height 1000\n  seasonstereo bench train-step --config vits --height 128 --width 128\n  \
     seasonstereo bench merge --cells 16384 --work merge16k\n\n\
     Weights are random: the time of a pass does not depend on them. Compare with the PyTorch \

@@ -36,8 +36,8 @@ enum SsimArg {
     Outputs: OUT/scores.csv, OUT/selected.txt, OUT/selected.csv, OUT/curate.json, OUT/report.html. \
     With --shard, each shard scores its pairs; the ranking runs once all pairs are scored (rerun \
     without --shard to force it).\n\n\
-    Example: seasonstereo curate --pairs data/synchronic_only --teacher data/teacher/sgm -o data/curate \
-    --keep 1000"
+    Example:\n  seasonstereo curate --pairs data/synchronic_only --teacher data/teacher/sgm \\\n      \
+    -o data/curate --keep 1000"
 )]
 pub struct CurateArgs {
     /// Folder of rectified pairs (L/, R/).

@@ -47,9 +47,9 @@ enum DatasetCommand {
     Resumable: every file is written atomically and skipped when present; a killed build redoes \
     at most the file it was writing. Shardable over the sorted pairs; the lists and the manifest \
     are written when every pair is finished (by the last shard, or by any rerun).\n\n\
-    Example:\n  seasonstereo dataset build --pairs data/synchronic_only --selected \
-    out/curate/selected.txt --synthetic out/synthetic --masks out/masks --teacher out/teacher \
-    -o data/diachronic-stereo-synthetic"
+    Example:\n  seasonstereo dataset build --pairs data/synchronic_only \\\n      --selected \
+    out/curate/selected.txt --synthetic out/synthetic \\\n      --masks out/masks --teacher \
+    out/teacher \\\n      -o data/diachronic-stereo-synthetic"
 )]
 struct BuildArgs {
     /// Synchronic pairs folder (L/, R/, homography/).

@@ -21,69 +21,105 @@ enum EvalMethod {
     GroundTruth,
 }
 
+/// The example, ending both `-h` and `--help`.
+macro_rules! example {
+    () => {
+        "Example:
+  seasonstereo eval --split Jacksonville=test/jax \\
+      --split \"Omaha Diach.\"=test/oma_dia --rpc-dir root_dir \\
+      --truth-dir Track3-Truth --predictions preds/monster -o out/eval"
+    };
+}
+
+/// The headings of `eval`'s options.
+const SPLITS: &str = crate::args::heading::INPUTS;
+const OUTPUTS: &str = crate::args::heading::OUTPUTS;
+const DISPARITIES: &str = "Disparities";
+const PROTOCOL: &str = "Benchmark protocol";
+
 #[derive(Args)]
 #[command(
-    after_help = "Layout: SPLIT_DIR/{L,R}/<stem>.iio, SPLIT_DIR/homography/<stem>.npz, optional \
-    SPLIT_DIR/disparity/<stem>.iio; <stem> = <LEFTID>-<RIGHTID>; RPC_DIR/<IMAGEID>.json (SatNeRF/rpcm); \
-    TRUTH_DIR/<AOI>_DSM.tif, <AOI>_CLS.tif, optional <AOI>_WATER.png. Outputs: OUT/pairs.csv (one row \
-    per method, split and pair), OUT/table1.md, OUT/dsm/<method>/<split>/<stem>.tif with --save-dsm.\n\n\
-    Example: seasonstereo eval --split Jacksonville=test/jax --split \"Omaha Diach.\"=test/oma_dia \
-    --rpc-dir root_dir --truth-dir Track3-Truth --predictions preds/monster -o out/eval"
+    after_help = example!(),
+    after_long_help = concat!(
+        "Layout: SPLIT_DIR/{L,R}/<stem>.iio, SPLIT_DIR/homography/<stem>.npz, optional \
+        SPLIT_DIR/disparity/<stem>.iio; <stem> = <LEFTID>-<RIGHTID>; RPC_DIR/<IMAGEID>.json \
+        (SatNeRF/rpcm); TRUTH_DIR/<AOI>_DSM.tif, <AOI>_CLS.tif, optional <AOI>_WATER.png. Outputs: \
+        OUT/pairs.csv (one row per method, split and pair), OUT/table1.md, \
+        OUT/dsm/<method>/<split>/<stem>.tif with --save-dsm.\n\n",
+        example!()
+    )
 )]
 pub struct EvalArgs {
-    /// A test split NAME=DIR (repeat). Table 1's names: Jacksonville, "Buenos Aires",
-    /// "Omaha Synch.", "Omaha Diach." (aliases jax, ba, omaha-sync, omaha-dia); other names get
-    /// columns of their own. Omaha splits drop pairs whose true disparity exceeds the limit.
+    /// A test split NAME=DIR (repeat).
+    ///
+    /// Table 1's names: Jacksonville, "Buenos Aires", "Omaha Synch.", "Omaha Diach." (aliases
+    /// jax, ba, omaha-sync, omaha-dia); other names get columns of their own. Omaha splits drop
+    /// pairs whose true disparity exceeds the limit.
     #[arg(long = "split", value_name = "NAME=DIR", value_parser = eval::Split::parse,
-          required_unless_present = "world")]
+          required_unless_present = "world", help_heading = SPLITS)]
     splits: Vec<eval::Split>,
-    /// Evaluate a folder written by `seasonstereo world` (split "World", DIR/rpc, DIR/truth).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["splits", "rpc_dir", "truth_dir"])]
+    /// Evaluate a folder written by `seasonstereo world` instead.
+    ///
+    /// Split "World", with DIR/rpc and DIR/truth.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["splits", "rpc_dir", "truth_dir"],
+          help_heading = SPLITS)]
     world: Option<PathBuf>,
     /// Folder of the cameras <IMAGEID>.json (SatNeRF/rpcm JSON, the `root_dir`).
-    #[arg(long, value_name = "DIR", required_unless_present = "world")]
+    #[arg(long, value_name = "DIR", required_unless_present = "world", help_heading = SPLITS)]
     rpc_dir: Option<PathBuf>,
-    /// Folder of the ground truth <AOI>_DSM.tif (GeoTIFF, or the DFC2019 plain TIFF with its
-    /// <AOI>_DSM.txt georeference beside it: the UTM zone is taken from the pair's cameras),
-    /// <AOI>_CLS.tif, <AOI>_WATER.png.
-    #[arg(long, value_name = "DIR", required_unless_present = "world")]
+    /// Folder of the ground truth <AOI>_DSM.tif, <AOI>_CLS.tif, <AOI>_WATER.png.
+    ///
+    /// The DSM as a GeoTIFF, or the DFC2019 plain TIFF with its <AOI>_DSM.txt georeference
+    /// beside it (the UTM zone is taken from the pair's cameras).
+    #[arg(long, value_name = "DIR", required_unless_present = "world", help_heading = SPLITS)]
     truth_dir: Option<PathBuf>,
     /// Compute the disparities with this method (or with --model)...
-    #[arg(long, value_enum, default_value_t = EvalMethod::Mgm)]
+    #[arg(long, value_enum, default_value_t = EvalMethod::Mgm, help_heading = DISPARITIES)]
     method: EvalMethod,
-    /// ...or read them from DIR/[<SPLIT>/]<stem>.{iio,npy,tif,pfm} (full rectified or crop size).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["method", "model"])]
+    /// ...or read them from DIR/[<SPLIT>/]<stem>.{iio,npy,tif,pfm}.
+    ///
+    /// Full rectified or crop size.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["method", "model"],
+          help_heading = DISPARITIES)]
     predictions: Option<PathBuf>,
-    /// Row name of the method in the CSV and Table 1 (default: from the method or DIR).
-    #[arg(long)]
+    /// Row name of the method in the CSV and Table 1.
+    ///
+    /// Default: from the method or DIR.
+    #[arg(long, help_heading = OUTPUTS)]
     name: Option<String>,
     /// Output folder.
-    #[arg(short, long, default_value = "out/eval")]
+    #[arg(short, long, default_value = "out/eval", help_heading = OUTPUTS)]
     output: PathBuf,
     /// Also write each predicted DSM as a GeoTIFF on the ground truth's grid.
-    #[arg(long)]
+    #[arg(long, help_heading = OUTPUTS)]
     save_dsm: bool,
     /// Evaluate at most the first N pairs (by stem) of each split.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", help_heading = SPLITS)]
     max_pairs: Option<usize>,
     /// AOI of an image id = its first N '_'-separated fields (JAX_068_001_RGB → JAX_068 with 2).
-    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..),
+          help_heading = PROTOCOL, hide_short_help = true)]
     aoi_fields: u16,
     /// Put every pair in this AOI instead (one ground-truth DSM for all).
-    #[arg(long, value_name = "AOI", conflicts_with = "aoi_fields")]
+    #[arg(long, value_name = "AOI", conflicts_with = "aoi_fields",
+          help_heading = PROTOCOL, hide_short_help = true)]
     aoi: Option<String>,
     /// Centre-crop rectified pairs larger than this, pixels.
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, default_value_t = 1024, help_heading = PROTOCOL, hide_short_help = true)]
     crop: usize,
     /// Omaha pairs whose ground-truth disparity exceeds this are dropped, pixels.
-    #[arg(long, default_value_t = eval::aggregate::OMAHA_MAX_DISPARITY)]
+    #[arg(long, default_value_t = eval::aggregate::OMAHA_MAX_DISPARITY,
+          help_heading = PROTOCOL, hide_short_help = true)]
     omaha_max_disparity: f64,
-    /// Scoring rules: `release` = the benchmark's released evaluator exactly (per-score
-    /// registration on the masked truth, its NCC pyramid, _WATER.png 0 = water, truth nodata not
-    /// masked); `robust` = one registration on the whole truth, NaN for the truth's nodata, a
-    /// centre-preferring NCC with a minimum overlap (rows named "<method> [robust]").
+    /// Scoring rules: `release` (the benchmark's evaluator exactly) or `robust`.
+    ///
+    /// `release` = the benchmark's released evaluator exactly (per-score registration on the
+    /// masked truth, its NCC pyramid, _WATER.png 0 = water, truth nodata not masked); `robust` =
+    /// one registration on the whole truth, NaN for the truth's nodata, a centre-preferring NCC
+    /// with a minimum overlap (rows named "<method> [robust]").
     #[arg(long, value_name = "release|robust", default_value = "release",
-          value_parser = eval::Protocol::parse)]
+          value_parser = eval::Protocol::parse,
+          help_heading = PROTOCOL, hide_short_help = true)]
     protocol: eval::Protocol,
     #[command(flatten)]
     sgm: SgmArgs,

@@ -33,9 +33,10 @@ use crate::args::{report, DeviceArg, ShardArg};
     pixel-classifier is the previous offline default, a Gaussian mixture trained on procedural \
     worlds (tree IoU 0.00 / building IoU 0.39 on the dev images). Images must be \
     8-bit (0–255).\n\n\
-    Examples:\n  seasonstereo masks --images data/raw_crops -o data/segmentation --segformer \
-    checkpoints/openearthmap_segformer_mit-b2.pt\n  seasonstereo masks --images data/raw_crops \
-    -o data/segmentation --pairs data/pairs --disparities data/teacher/sgm"
+    Examples:\n  seasonstereo masks --images data/raw_crops -o data/segmentation \\\n      \
+    --segformer checkpoints/openearthmap_segformer_mit-b2.pt\n  seasonstereo masks --images \
+    data/raw_crops -o data/segmentation \\\n      --pairs data/pairs --disparities \
+    data/teacher/sgm"
 )]
 pub struct MasksArgs {
     /// Folder of images (searched recursively: .png .tif .tiff .iio .npy); outputs are named by
@@ -139,8 +140,8 @@ pub fn run(a: MasksArgs, progress: &dyn Progress) -> Result<()> {
     each one's shift is found by the benchmark's rule and the truth is moved by the median shift \
     before it is projected. On the JAX_068 dev data the 12 pairs' DSMs are 0 or 1 cell off, \
     not in one direction, and the scores move by at most 0.01 (BENCHMARKS.md).\n\n\
-    Example: seasonstereo masks-score --masks out/masks --rpc-dir ../shared/data/dfc2019-jax068-dev/rpcs/ba \
-    --truth ../shared/data/dfc2019-jax068-dev/truth/JAX_068_DSM.tif --register out/jax/006-020.tif"
+    Example:\n  D=../shared/data/dfc2019-jax068-dev\n  seasonstereo masks-score --masks out/masks \
+    --rpc-dir $D/rpcs/ba \\\n      --truth $D/truth/JAX_068_DSM.tif --register out/jax/006-020.tif"
 )]
 pub struct MasksScoreArgs {
     /// A `masks` output folder.

@@ -8,33 +8,50 @@ use seasonstereo::{predict, read_pair, write_disparity, Matched, Matcher, Progre
 
 use crate::args::{parse_range, MatcherArgs};
 
+/// The examples, ending both `-h` and `--help`.
+macro_rules! examples {
+    () => {
+        "Examples:
+  seasonstereo predict --method sgm --range 0:48 L.iio R.iio -o d.iio
+  seasonstereo predict --model monsterpp --weights mix_all.pth --config vitl \\
+      --iters 32 L.iio R.iio -o d.iio --color d.png"
+    };
+}
+
 #[derive(Args)]
 #[command(
-    after_help = "Methods: census + SGM by default (--method sgm, needs a disparity range); the \
-    MonSter++ network with --model monsterpp --weights FILE (the released .pth checkpoints are \
-    --config vitl; no range needed, disparities up to --max-disp).\n\n\
-    MonSter++ expects 8-bit RGB values (0–255): grey images are repeated to RGB, alpha is dropped; \
-    rescale uint16 satellite images with --normalise percentile (2–98th percentile → 0–255). \
-    Pixels with NaN in the left image are NaN in the output. Sizes are padded to multiples of 32 \
-    (replicate, as upstream). One forward pass may use at most --net-memory; larger pairs are cut \
-    into overlapping strips of full rows (epipolar lines) that are blended.\n\n\
-    Examples:\n  seasonstereo predict --method sgm --range 0:48 L.iio R.iio -o d.iio\n  \
-    seasonstereo predict --model monsterpp --weights mix_all.pth --config vitl --iters 32 \
-    L.iio R.iio -o d.iio --color d.png"
+    after_help = examples!(),
+    after_long_help = concat!(
+        "Methods: census + MGM by default (--method sgm: SGM), over --range or a range estimated \
+        from the images; the MonSter++ network with --model monsterpp --weights FILE (the \
+        released .pth checkpoints are --config vitl; no range needed, disparities up to \
+        --max-disp).\n\n\
+        MonSter++ expects 8-bit RGB values (0–255): grey images are repeated to RGB, alpha is \
+        dropped; rescale uint16 satellite images with --normalise percentile (2–98th percentile \
+        → 0–255). Pixels with NaN in the left image are NaN in the output. Sizes are padded to \
+        multiples of 32 (replicate, as upstream). One forward pass may use at most --net-memory; \
+        larger pairs are cut into overlapping strips of full rows (epipolar lines) that are \
+        blended.\n\n",
+        examples!()
+    )
 )]
 pub struct PredictArgs {
     /// Left image of the rectified pair (.iio/.npy, .tif, .png, .pfm).
     left: PathBuf,
     /// Right image of the rectified pair, same size as the left one.
     right: PathBuf,
-    /// Output disparity; the extension picks the format: .iio/.npy, .tif, .pfm keep the values
-    /// (NaN = invalid); .png writes a colour-mapped picture.
+    /// Output disparity; the extension picks the format.
+    ///
+    /// .iio/.npy, .tif, .pfm keep the values (NaN = invalid); .png writes a colour-mapped
+    /// picture.
     #[arg(short, long)]
     output: PathBuf,
     #[command(flatten)]
     matcher: MatcherArgs,
-    /// Disparity search range MIN:MAX (inclusive, pixels), e.g. from the cameras and an altitude
-    /// range. Estimated from the images when absent (less reliable on multi-date pairs). SGM only.
+    /// Disparity search range MIN:MAX, pixels (default: estimated from the images).
+    ///
+    /// Inclusive, e.g. from the cameras and an altitude range. Estimated from the images when
+    /// absent (less reliable on multi-date pairs). Classical matcher only.
     #[arg(long, value_parser = parse_range, allow_hyphen_values = true, conflicts_with = "model")]
     range: Option<(i32, i32)>,
     /// Also write a colour-mapped picture of the disparity to this PNG.

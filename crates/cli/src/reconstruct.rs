@@ -12,129 +12,208 @@ use seasonstereo::{
 use reconstruct::flags;
 
 use crate::args::{
-    parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs, ProductArgs,
-    ShardArg, TilingArgs,
+    heading, parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs,
+    ProductArgs, ShardArg, TilingArgs,
 };
+
+/// `reconstruct -h`'s epilogue: the principal use, as it pastes.
+const AFTER_HELP: &str = "\
+Example (a vendor delivery: each image with its .RPB camera and .IMD beside it):
+  D=../shared/data/dfc2019-jax068-dev
+  seasonstereo reconstruct $D/vendor/JAX_068_006_RGB.TIF \\
+      $D/vendor/JAX_068_020_RGB.TIF -o out/jax/006-020.tif
+
+Every option, the steps and the files written: seasonstereo reconstruct --help";
+
+/// `reconstruct --help`'s epilogue: the steps, the files a default run writes, examples.
+const AFTER_LONG_HELP: &str = "\
+Steps: the pair's pointing error is measured from tie points and removed (not for JSON cameras \
+that carry the scene's altitudes; --no-pointing-correction). Then, tile by tile (--tile), the \
+pair is rectified from the RPCs, the right image sheared so that one altitude has one \
+disparity, and matched over the disparities that the scene's altitudes span (--alt-range): \
+census + MGM by default (--method sgm; --model monsterpp --weights W). On very narrow baselines \
+the classical matcher works on rows stretched 2x under 0.4 px of disparity per metre of \
+altitude, and under 0.63 px/m matches from both views (--single-view). The points are \
+triangulated with the full RPCs (s2p's iteration) and gridded, the median per cell \
+(--gridding). The merged DSM's holes are filled near data (--fill-holes, --fill-reach) and it \
+is median-filtered (--median-filter).
+
+Files: OUTPUT (float32 COG), OUTPUT_filled.tif (0 measured, 1 filled, NaN no height), with the \
+classical matcher OUTPUT_confidence.tif, and the products asked for (--ortho, --points, \
+--preview). The work folder (--work, default OUTPUT_work/) holds scene.json and tiles/ (each \
+tile's record and cells): a rerun resumes there, and --shard/--merge share it. \
+--keep-intermediates adds each tile's rectified pair and disparity (L/, R/, homography/, \
+rectify/, disparity/), the layout `seasonstereo eval` reads.
+
+Examples:
+  D=../shared/data/dfc2019-jax068-dev
+  # A vendor delivery: each image with its .RPB camera and .IMD metadata beside it
+  seasonstereo reconstruct $D/vendor/JAX_068_006_RGB.TIF \\
+      $D/vendor/JAX_068_020_RGB.TIF -o out/jax/006-020.tif
+  # On the truth's grid and scored against it, with an orthoimage and points
+  seasonstereo reconstruct $D/vendor/JAX_068_006_RGB.TIF \\
+      $D/vendor/JAX_068_020_RGB.TIF -o out/jax/006-020.tif \\
+      --like $D/truth/JAX_068_DSM.tif --truth $D/truth/JAX_068_DSM.tif \\
+      --ortho out/jax/006-020_ortho.tif --points out/jax/006-020.laz
+  # Bundle-adjusted JSON cameras, used as given
+  seasonstereo reconstruct $D/images/JAX_068_006_RGB.tif \\
+      $D/images/JAX_068_020_RGB.tif -o out/jax/006-020-ba.tif \\
+      --rpc-left $D/rpcs/ba/JAX_068_006_RGB.json \\
+      --rpc-right $D/rpcs/ba/JAX_068_020_RGB.json";
 
 #[derive(Args)]
 #[command(
-    after_help = "Steps: rectify (RPCs; the right image is sheared so that one altitude has one \
-    disparity over the tile, and the disparity range is then what the scene's altitudes span, \
-    --alt-range or the cameras' min_alt/max_alt: give them wide enough for the tallest building), \
-    match (census + MGM by default; --method sgm; or --model monsterpp --weights W; \
-    on very narrow baselines, under 0.4 px of disparity per metre of altitude, the classical \
-    matcher works on rows stretched 2x for half-pixel steps; under 0.63 px/m it matches from both \
-    views and keeps the cells they agree on, see --single-view), triangulate with the full RPCs (s2p's iteration) and grid. Intermediate files stay in \
-    --work (default OUTPUT_work/: L/, R/, homography/, rectify/, disparity/), in the layout \
-    `seasonstereo eval` reads.\n\n\
-    Example (DFC2019 Jacksonville, bundle-adjusted cameras, scored against the LiDAR truth):\n  \
-    D=../shared/data/dfc2019-jax068-dev\n  seasonstereo reconstruct $D/images/JAX_068_006_RGB.tif \
-    $D/images/JAX_068_020_RGB.tif --rpc-left $D/rpcs/ba/JAX_068_006_RGB.json --rpc-right \
-    $D/rpcs/ba/JAX_068_020_RGB.json --like $D/truth/JAX_068_DSM.tif --truth \
-    $D/truth/JAX_068_DSM.tif -o out/jax/006-020.tif"
+    after_help = AFTER_HELP,
+    after_long_help = AFTER_LONG_HELP,
+    // The matcher's choice shows in `predict -h`; here the default is what most runs need.
+    mut_arg("method", |a| a.hide_short_help(true)),
+    mut_arg("model", |a| a.hide_short_help(true)),
+    mut_arg("weights", |a| a.hide_short_help(true)),
 )]
 pub struct ReconstructArgs {
-    /// Left raw image: a GeoTIFF with its RPC (tag 50844), or any raster with --rpc-left.
+    /// Left raw image; its camera is found beside it or in it.
+    ///
+    /// A TIFF/GeoTIFF (read in windows), or another raster the program reads. Its camera:
+    /// --rpc-left when given, else a vendor sidecar beside it found as GDAL does (<stem>.RPB,
+    /// <stem>_RPC.TXT, DIMAP RPC_*.XML), else the TIFF's RPC tag 50844.
+    #[arg(help_heading = heading::INPUTS, display_order = 0)]
     left: PathBuf,
-    /// Right raw image, idem with --rpc-right.
+    /// Right raw image, idem (or --rpc-right).
+    #[arg(help_heading = heading::INPUTS, display_order = 0)]
     right: PathBuf,
-    /// Output DSM: float32 GeoTIFF (heights above the WGS84 ellipsoid; the scene's UTM zone or
-    /// --epsg). Beside it `<stem>_filled.tif`,
-    /// on the same grid: 0 = measured cell, 1 = filled by hole filling, NaN = no height; and,
-    /// with the classical matcher, `<stem>_confidence.tif`: each measured cell's matching
-    /// confidence, 1 − S1/S2 (the winner's aggregated cost against its best rival more than a
-    /// pixel away), 0 to 1, NaN elsewhere.
-    #[arg(short, long)]
-    output: PathBuf,
-    /// Left camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
+    /// Left camera file, instead of the one found with the image.
+    ///
+    /// A SatNeRF/rpcm JSON (`.json`; with min_alt/max_alt it is used as given, see
+    /// --no-pointing-correction), a vendor .RPB, _RPC.TXT or DIMAP RPC_*.XML, or another
     /// GeoTIFF carrying the RPC tag 50844.
-    #[arg(long, value_name = "CAMERA")]
+    #[arg(long, value_name = "CAMERA", help_heading = heading::INPUTS, display_order = 1)]
     rpc_left: Option<PathBuf>,
-    /// Right camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
-    /// GeoTIFF carrying the RPC tag 50844.
-    #[arg(long, value_name = "CAMERA")]
+    /// Right camera file, instead of the one found with the image.
+    ///
+    /// Same kinds as --rpc-left.
+    #[arg(long, value_name = "CAMERA", help_heading = heading::INPUTS, display_order = 1)]
     rpc_right: Option<PathBuf>,
-    /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
-    #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi, conflicts_with = "roi_lonlat")]
+    /// Output DSM (.tif): heights above the WGS84 ellipsoid, float32 COG.
+    ///
+    /// In the scene's UTM zone (or --epsg, or --like's grid); the geoid's heights with
+    /// --heights egm96. By default the holes near data are filled (--fill-holes, --fill-reach)
+    /// and the DSM median-filtered (--median-filter); cells left without a height are NaN.
+    /// Beside it, on the same grid: `<stem>_filled.tif` (0 = measured cell, 1 = filled by hole
+    /// filling, NaN = no height) and, with the classical matcher, `<stem>_confidence.tif`: each
+    /// measured cell's matching confidence, 1 − S1/S2 (the winner's aggregated cost against its
+    /// best rival more than a pixel away), 0 to 1, NaN elsewhere.
+    #[arg(short, long, help_heading = heading::OUTPUTS)]
+    output: PathBuf,
+    /// Work folder, to resume (default: OUTPUT without extension + "_work").
+    ///
+    /// It holds scene.json and tiles/ (each tile's record and cells); a rerun finishes only the
+    /// unfinished tiles, and sharded runs share it. A folder made with other settings is
+    /// refused (cleared with --overwrite).
+    #[arg(long, value_name = "DIR", help_heading = heading::OUTPUTS)]
+    work: Option<PathBuf>,
+    /// Region of the left image X,Y,W,H, pixels (default: the whole image).
+    #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi, conflicts_with = "roi_lonlat",
+          help_heading = heading::REGION)]
     roi: Option<camera::rectify::Roi>,
-    /// Region of interest as lon/lat bounds (degrees): the left image's pixels that see it at
-    /// any altitude of the scene.
-    #[arg(long, value_name = "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX", value_parser = parse_lonlat, allow_hyphen_values = true)]
+    /// Region as lon/lat bounds, degrees.
+    ///
+    /// The left image's pixels that see it at any altitude of the scene.
+    #[arg(long, value_name = "LON_MIN,LAT_MIN,LON_MAX,LAT_MAX", value_parser = parse_lonlat,
+          allow_hyphen_values = true, help_heading = heading::REGION)]
     roi_lonlat: Option<[f64; 4]>,
     #[command(flatten)]
-    tiling: TilingArgs,
-    /// The tiles of the plan, all shards sharing one --work folder; the shard that finds every
-    /// tile finished writes the DSM (or run --merge at the end).
-    #[command(flatten)]
-    shard: ShardArg,
-    /// Only assemble the DSM from the tiles in --work (after sharded runs); fails naming the
-    /// missing tiles, and (exit code 3) the failed ones unless --allow-partial.
-    #[arg(long)]
-    merge: bool,
-    /// Run this shard's tiles and stop, never assembling the DSM (cluster jobs, whose merge is
-    /// a task of its own); exit code 2 when some of them failed.
-    #[arg(long, conflicts_with = "merge")]
-    tiles_only: bool,
-    /// Keep every tile's rectified pair and disparity in --work (L/, R/, homography/,
-    /// disparity/, the layout `seasonstereo eval` reads); off by default, as they take ~30 bytes
-    /// per pixel.
-    #[arg(long)]
-    keep_intermediates: bool,
-    /// Match very narrow baselines from the left view only. By default the classical matcher
-    /// measures a tile under 0.63 px of disparity per metre of altitude (a pixel is over 1.6 m
-    /// of height) from both views, and a cell keeps their mean height only where both measured
-    /// it within 2 m; the others are left to the hole filling (flagged in the _filled sidecar).
-    /// The second match runs beside the first on those tiles (about 1.5x their time, twice their
-    /// matching memory); `reconstruct-many` does the same for each pair.
-    #[arg(long)]
-    single_view: bool,
-    /// Altitudes of the scene MIN:MAX, metres: the disparity search covers them and little more
-    /// (heights outside are not found). Default: min_alt/max_alt of the JSON cameras, else the
-    /// altitudes of the tie points found to correct the pointing (their 0.5 and 99.5
-    /// percentiles, widened by 5 m and a tenth of their span).
-    #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true)]
-    alt_range: Option<(f64, f64)>,
-    /// Use the cameras as given. By default the pair's relative pointing error (vendor RPCs are
-    /// off by a few to tens of pixels, one translation over the image) is measured from tie
-    /// points between the images and removed by translating the right camera; the log says by
-    /// how much. JSON cameras that carry the scene's altitudes (min_alt/max_alt: a curated,
-    /// bundle-adjusted set, or those reconstruct-many writes) are always used as given. Without
-    /// the correction and without such cameras, give --alt-range.
-    #[arg(long)]
-    no_pointing_correction: bool,
-    /// Folder of the intermediate files (default: OUTPUT without extension + "_work").
-    #[arg(long, value_name = "DIR")]
-    work: Option<PathBuf>,
-    #[command(flatten)]
     grid: GridArgs,
-    #[command(flatten)]
-    products: ProductArgs,
-    /// Height of a cell from its points. Default median: robust, the DSM to use. `max` is the
-    /// benchmark's protocol (what `seasonstereo eval` does).
-    #[arg(long, value_enum, default_value_t = GriddingArg::Median)]
-    gridding: GriddingArg,
-    /// Fill the DSM's holes enclosed by data within this many cells (on both sides of the cell
-    /// along a row, column or diagonal), ground first (the ground hidden behind buildings,
-    /// unmatched patches); 0 leaves them empty, as the benchmark's protocol does.
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_CELLS)]
-    fill_holes: usize,
-    /// Fill only the cells within this many cells of a measured height (along the filling's
-    /// rays): the middle of a wider hole stays empty, because a height invented that far from
-    /// any measurement is a guess (a courtyard at its roofs' height, a low roof at the ground's).
-    /// The `_filled.tif` sidecar marks the filled cells either way.
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_REACH)]
-    fill_reach: usize,
-    /// Median filter of the DSM over this odd window of cells, after the filling: removes the
-    /// roughness of single-pair matching on roofs and ground and keeps building edges (15 cells
-    /// = 7.5 m at 0.5 m); 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_MEDIAN_CELLS)]
-    median_filter: usize,
-    /// Score the DSM against this ground truth <AOI>_DSM.tif (classes <AOI>_CLS.tif beside it)
-    /// with the benchmark's metric; needs --like on the same file.
-    #[arg(long, value_name = "DSM", requires = "like")]
+    /// Scene altitudes MIN:MAX, metres (default: from cameras or tie points).
+    ///
+    /// The disparity search covers them and little more: heights outside are not found; give
+    /// them wide enough for the tallest building. Default: min_alt/max_alt of the JSON cameras,
+    /// else the altitudes of the tie points found to correct the pointing (their 0.5 and 99.5
+    /// percentiles, widened by 5 m and a tenth of their span).
+    #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true,
+          help_heading = heading::QUALITY)]
+    alt_range: Option<(f64, f64)>,
+    /// Score the DSM against this ground truth (needs --like on it).
+    ///
+    /// A ground truth <AOI>_DSM.tif (the classes <AOI>_CLS.tif beside it), with the benchmark's
+    /// metric (MAE and coverage); --like must name the same file.
+    #[arg(long, value_name = "DSM", requires = "like", help_heading = heading::QUALITY)]
     truth: Option<PathBuf>,
     #[command(flatten)]
+    tiling: TilingArgs,
+    #[command(flatten)]
+    shard: ShardArg,
+    /// Only assemble the DSM from the tiles in --work (after sharded runs).
+    ///
+    /// Fails naming the missing tiles, and (exit code 3) the failed ones unless
+    /// --allow-partial.
+    #[arg(long, help_heading = heading::CLUSTER)]
+    merge: bool,
+    /// Run this shard's tiles and stop, never assembling the DSM.
+    ///
+    /// For cluster jobs, whose merge is a task of its own; exit code 2 when some of them
+    /// failed.
+    #[arg(long, conflicts_with = "merge", help_heading = heading::CLUSTER)]
+    tiles_only: bool,
+    #[command(flatten)]
     matcher: MatcherArgs,
+    /// Match very narrow baselines from the left view only.
+    ///
+    /// By default the classical matcher measures a tile under 0.63 px of disparity per metre of
+    /// altitude (a pixel is over 1.6 m of height) from both views, and a cell keeps their mean
+    /// height only where both measured it within 2 m; the others are left to the hole filling
+    /// (flagged in the _filled sidecar). The second match runs beside the first on those tiles
+    /// (about 1.5x their time, twice their matching memory); `reconstruct-many` does the same
+    /// for each pair.
+    #[arg(long, help_heading = heading::MATCHING, hide_short_help = true)]
+    single_view: bool,
+    /// Use the cameras as given, without correcting their pointing.
+    ///
+    /// By default the pair's relative pointing error (vendor RPCs are off by a few to tens of
+    /// pixels, one translation over the image) is measured from tie points between the images
+    /// and removed by translating the right camera; the log says by how much. JSON cameras that
+    /// carry the scene's altitudes (min_alt/max_alt: a curated, bundle-adjusted set, or those
+    /// reconstruct-many writes) are always used as given. Without the correction and without
+    /// such cameras, give --alt-range.
+    #[arg(long, help_heading = heading::MATCHING, hide_short_help = true)]
+    no_pointing_correction: bool,
+    /// Height of a cell from its points (default median: the DSM to use).
+    ///
+    /// `median` is robust to isolated wrong points; `max` is the benchmark's protocol (what
+    /// `seasonstereo eval` does).
+    #[arg(long, value_enum, default_value_t = GriddingArg::Median,
+          help_heading = heading::GRID, hide_short_help = true)]
+    gridding: GriddingArg,
+    /// Fill the holes enclosed by data within this many cells; 0 leaves them empty.
+    ///
+    /// A cell is filled when data lie on both sides of it along a row, column or diagonal
+    /// within this distance, ground first (the ground hidden behind buildings, unmatched
+    /// patches); 0 leaves every hole empty, as the benchmark's protocol does.
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_CELLS,
+          help_heading = heading::FINISHING, hide_short_help = true)]
+    fill_holes: usize,
+    /// Fill only the cells within this many cells of a measured height.
+    ///
+    /// Along the filling's rays: the middle of a wider hole stays empty, because a height
+    /// invented that far from any measurement is a guess (a courtyard at its roofs' height, a
+    /// low roof at the ground's). The `_filled.tif` sidecar marks the filled cells either way.
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_REACH,
+          help_heading = heading::FINISHING, hide_short_help = true)]
+    fill_reach: usize,
+    /// Median filter of the DSM over this odd window of cells; 0 or 1 disables it.
+    ///
+    /// After the filling: removes the roughness of single-pair matching on roofs and ground and
+    /// keeps building edges (15 cells = 7.5 m at 0.5 m).
+    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_MEDIAN_CELLS,
+          help_heading = heading::FINISHING, hide_short_help = true)]
+    median_filter: usize,
+    #[command(flatten)]
+    products: ProductArgs,
+    /// Keep every tile's rectified pair and disparity in --work.
+    ///
+    /// L/, R/, homography/, rectify/, disparity/: the layout `seasonstereo eval` reads. Off by
+    /// default, as they take ~30 bytes per pixel.
+    #[arg(long, help_heading = heading::PRODUCTS, hide_short_help = true)]
+    keep_intermediates: bool,
 }
 
 pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {

@@ -14,7 +14,7 @@ use crate::args::{parse_alt_range, parse_roi};
     raw images), OUT/homography/<stem>.npz (Hleft, Hright: raw → rectified, flip included) and \
     OUT/rectify/<STEM>.json (ranges, region, sizes). Disparity x_L − x_R is positive and grows with \
     altitude; pass the printed range to `seasonstereo predict --range`.\n\n\
-    Example (s2p's Pléiades test pair):\n  seasonstereo rectify img_01.tif img_02.tif -o out/s2p \
+    Example (s2p's Pléiades test pair):\n  seasonstereo rectify img_01.tif img_02.tif -o out/s2p \\\n      \
     --roi 150,150,700,700 --alt-range 2200:2450"
 )]
 pub struct RectifyArgs {

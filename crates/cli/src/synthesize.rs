@@ -12,6 +12,10 @@ use synth::{BuiltinSeasons, Season, SeasonGenerator};
 
 use crate::args::ShardArg;
 
+/// The headings of the options `-h` leaves out.
+const API: &str = "Generative API (--generator gemini)";
+const FIDELITY: &str = "Geometry-fidelity check";
+
 fn parse_season(s: &str) -> Result<Season, String> {
     s.parse::<Season>().map_err(|e| e.to_string())
 }
@@ -25,9 +29,20 @@ pub enum GeneratorKind {
     Gemini,
 }
 
-#[derive(Args)]
-#[command(
-    after_help = "Inputs: PAIRS/L/<pair>.iio, PAIRS/R/<pair>.iio, PAIRS/homography/<pair>.npz \
+/// The examples, ending both `-h` and `--help`.
+macro_rules! examples {
+    () => {
+        "Examples:
+  seasonstereo synthesize --pairs data/synchronic_only --raw data/Train-Track3 \\
+      --selected out/curate/selected.txt -o out/synthetic
+  GEMINI_API_KEY=… seasonstereo synthesize --generator gemini \\
+      --prompts seasons.toml --pairs P --raw RAW -o out/synthetic"
+    };
+}
+
+/// `synthesize --help`'s epilogue: the files read and written, then the examples.
+const AFTER_LONG_HELP: &str = concat!(
+    "Inputs: PAIRS/L/<pair>.iio, PAIRS/R/<pair>.iio, PAIRS/homography/<pair>.npz \
     (the release's synchronic_only/ or `seasonstereo rectify` outputs) and the raw images \
     RAW/**/<id>.{tif,png,npy,iio} of the pairs' image ids (the release's Track3-RGB-* folders work \
     as they are). Per image: OUT/cropped/<id>.tif (+ .json, where the crop lies), \
@@ -36,11 +51,12 @@ pub enum GeneratorKind {
     OUT/variants/<id>.json (written last). `dataset build` rectifies the accepted variants with \
     the pair's homographies adapted to the crop.\n\n\
     Resumable: finished images are skipped, a variant already on disk is checked again, not \
-    regenerated. Shardable over the sorted image ids.\n\n\
-    Examples:\n  seasonstereo synthesize --pairs data/synchronic_only --raw data/Train-Track3 \
-    --selected out/curate/selected.txt -o out/synthetic\n  GEMINI_API_KEY=… seasonstereo \
-    synthesize --generator gemini --prompts seasons.toml --pairs P --raw RAW -o out/synthetic"
-)]
+    regenerated. Shardable over the sorted image ids.\n\n",
+    examples!()
+);
+
+#[derive(Args)]
+#[command(after_help = examples!(), after_long_help = AFTER_LONG_HELP)]
 pub struct SynthesizeArgs {
     /// Synchronic pairs folder (L/, R/, homography/).
     #[arg(long)]
@@ -71,28 +87,33 @@ pub struct SynthesizeArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// API model (gemini).
-    #[arg(long, default_value = synth::api::DEFAULT_MODEL)]
+    #[arg(long, default_value = synth::api::DEFAULT_MODEL,
+          help_heading = API, hide_short_help = true)]
     model: String,
     /// Seasonal prompts, TOML (gemini; default: the built-in prompts).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", help_heading = API, hide_short_help = true)]
     prompts: Option<PathBuf>,
     /// Environment variable holding the API key (gemini; the key is never logged).
-    #[arg(long, default_value = synth::api::DEFAULT_API_KEY_ENV)]
+    #[arg(long, default_value = synth::api::DEFAULT_API_KEY_ENV,
+          help_heading = API, hide_short_help = true)]
     api_key_env: String,
     /// API endpoint (gemini).
-    #[arg(long, default_value = synth::api::DEFAULT_BASE_URL)]
+    #[arg(long, default_value = synth::api::DEFAULT_BASE_URL,
+          help_heading = API, hide_short_help = true)]
     api_url: String,
     /// Requests in flight at once (gemini).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, help_heading = API, hide_short_help = true)]
     max_concurrent: usize,
-    /// Response cache, so a rerun never pays twice (gemini). Default: OUT/api-cache.
-    #[arg(long, value_name = "DIR")]
+    /// Response cache, so a rerun never pays twice (gemini).
+    ///
+    /// Default: OUT/api-cache.
+    #[arg(long, value_name = "DIR", help_heading = API, hide_short_help = true)]
     cache: Option<PathBuf>,
     /// Largest accepted global shift of a variant against its source, pixels.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, help_heading = FIDELITY, hide_short_help = true)]
     max_shift: f64,
     /// Smallest accepted edge score (NCC of the structure maps at zero shift).
-    #[arg(long, default_value_t = 0.6)]
+    #[arg(long, default_value_t = 0.6, help_heading = FIDELITY, hide_short_help = true)]
     min_edge_score: f64,
     #[command(flatten)]
     shard: ShardArg,

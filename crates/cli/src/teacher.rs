@@ -18,8 +18,9 @@ use crate::args::{parse_range, report, MatcherArgs, ShardArg};
     SGM range: --range, else PAIRS/rectify/<stem>.json (from `rectify`), else estimated from the \
     images.\n\n\
     Examples:\n  seasonstereo teacher --pairs data/synchronic_only -o data/teacher/sgm\n  \
-    seasonstereo teacher --pairs data/synchronic_only -o data/teacher/monster++ --model monsterpp \
-    --weights monster++-mix_all.pth --config vitl --shard $SLURM_ARRAY_TASK_ID/16"
+    seasonstereo teacher --pairs data/synchronic_only -o data/teacher/monster++ \\\n      \
+    --model monsterpp --weights monster++-mix_all.pth --config vitl \\\n      \
+    --shard $SLURM_ARRAY_TASK_ID/16"
 )]
 pub struct TeacherArgs {
     /// Folder of rectified pairs (L/, R/).

@@ -1070,3 +1070,284 @@ fn bench_times_a_network_pass_and_prints_json() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("mit-b2"), "{}", stderr(&o));
 }
+
+/// `seasonstereo ARGS` (a help request), laid out for a terminal `columns` wide: clap wraps
+/// help text to `COLUMNS` when the output is no terminal.
+fn help_text(args: &[&str], columns: usize) -> String {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_seasonstereo"))
+        .args(args)
+        .env("COLUMNS", columns.to_string())
+        .output()
+        .expect("the binary runs");
+    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    String::from_utf8(o.stdout).expect("UTF-8 help")
+}
+
+/// One option's entry in a help text: its name (`--long`, or `<NAME>` of a positional) and the
+/// lines of its description.
+struct Entry {
+    name: String,
+    lines: Vec<String>,
+}
+
+/// The name of the option an entry line starts: `  -o, --output <OUTPUT>  …`,
+/// `      --rpc-left <CAMERA>  …` or `  <LEFT>  …` (descriptions are indented further).
+fn entry_name(line: &str) -> Option<String> {
+    let spec = if let Some(rest) = line.strip_prefix("      --") {
+        format!("--{rest}")
+    } else if let Some(rest) = line.strip_prefix("  -") {
+        let rest = rest.get(2..)?.trim_start();
+        rest.starts_with("--").then(|| rest.to_string())?
+    } else if let Some(rest) = line.strip_prefix("  <") {
+        format!("<{rest}")
+    } else {
+        return None;
+    };
+    let name = spec.split([' ', '=']).next()?;
+    Some(name.to_string())
+}
+
+/// The option sections of a help text, in order: heading → entries. A heading is an unindented
+/// line ending in `:` followed by an option's entry; the epilogue ends the last section.
+fn sections(help: &str) -> Vec<(String, Vec<Entry>)> {
+    let lines: Vec<&str> = help.lines().collect();
+    let mut out: Vec<(String, Vec<Entry>)> = Vec::new();
+    let mut open = false;
+    for (i, line) in lines.iter().enumerate() {
+        let next_is_entry = lines.get(i + 1).and_then(|l| entry_name(l)).is_some();
+        if !line.starts_with(' ') && line.ends_with(':') && next_is_entry {
+            out.push((line.trim_end_matches(':').to_string(), Vec::new()));
+            open = true;
+        } else if line.is_empty() || !line.starts_with(' ') {
+            // A blank line separates entries (long help) or sections; prose ends the sections.
+            open = open && line.is_empty();
+        } else if let (true, Some((_, entries))) = (open, out.last_mut()) {
+            match entry_name(line) {
+                Some(name) => entries.push(Entry {
+                    name,
+                    lines: vec![line.to_string()],
+                }),
+                None => entries
+                    .last_mut()
+                    .expect("a description follows its entry")
+                    .lines
+                    .push(line.to_string()),
+            }
+        }
+    }
+    out
+}
+
+/// The example commands of a help text, each with its continuation lines joined: a command
+/// starts at a line `  seasonstereo …` and goes on while a line ends in ` \`. Fails on a line
+/// that continues a command without the backslash before it (a wrapped line cannot be pasted).
+fn example_commands(help: &str) -> Vec<String> {
+    let lines: Vec<&str> = help.lines().collect();
+    let mut commands = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        if !lines[i].starts_with("  seasonstereo ") {
+            i += 1;
+            continue;
+        }
+        let mut command = lines[i].trim().to_string();
+        while command.ends_with(" \\") {
+            i += 1;
+            let next = lines.get(i).unwrap_or(&"");
+            assert!(
+                next.starts_with("    ") && !next.trim().is_empty(),
+                "`{command}` ends in a backslash but the next line is {next:?}:\n{help}"
+            );
+            command.truncate(command.len() - 2);
+            command.push(' ');
+            command.push_str(next.trim());
+        }
+        let after = lines.get(i + 1).copied().unwrap_or("");
+        let ends = after.is_empty()
+            || !after.starts_with(' ')
+            || after.starts_with("  seasonstereo ")
+            || after.starts_with("  #")
+            || after.starts_with("  D=");
+        assert!(
+            ends,
+            "the line after `{command}` continues it without a backslash: {after:?}:\n{help}"
+        );
+        commands.push(command);
+        i += 1;
+    }
+    commands
+}
+
+/// `reconstruct` and `reconstruct-many`: `-h` fits a screen (60 lines at 100 columns), holds
+/// only the common options under the headings Inputs, Outputs, Region, Quality, Performance and
+/// Cluster, one line each; `--help` lists every option, those `-h` leaves out under headings of
+/// their own; the examples of both paste (every continuation after a ` \`, also on an
+/// 80-column terminal), use the data folder as a user's relative `$D`, and only real options.
+#[test]
+fn reconstruct_help_is_one_screen_grouped_and_its_examples_paste() {
+    let common = [
+        "Inputs",
+        "Outputs",
+        "Region",
+        "Quality",
+        "Performance",
+        "Cluster",
+    ];
+    let cases = [
+        (
+            "reconstruct",
+            "<LEFT>",
+            "seasonstereo reconstruct $D/vendor/JAX_068_006_RGB.TIF \
+             $D/vendor/JAX_068_020_RGB.TIF -o out/jax/006-020.tif",
+            &[
+                "--method",
+                "--model",
+                "--fill-holes",
+                "--fill-reach",
+                "--p1",
+                "--keep-intermediates",
+            ] as &[&str],
+        ),
+        (
+            "reconstruct-many",
+            "<IMAGE>...",
+            "seasonstereo reconstruct-many $D/vendor/*.TIF -o out/jax-many/dsm.tif",
+            &[
+                "--method",
+                "--model",
+                "--fill-holes",
+                "--cluster-tolerance",
+                "--p1",
+            ],
+        ),
+    ];
+    for (cmd, positional, vendor_example, must_hide) in cases {
+        let short = help_text(&[cmd, "-h"], 100);
+        let long = help_text(&[cmd, "--help"], 100);
+        let n = short.lines().count();
+        assert!(n <= 60, "`{cmd} -h` is {n} lines:\n{short}");
+        assert!(long.lines().count() > 2 * n, "`{cmd} --help` is not longer");
+
+        let short_sections = sections(&short);
+        let long_sections = sections(&long);
+        let headings: Vec<&str> = short_sections.iter().map(|(h, _)| h.as_str()).collect();
+        for h in common {
+            assert!(headings.contains(&h), "`{cmd} -h` has no {h}: {headings:?}");
+        }
+        for h in &headings {
+            assert!(
+                *h == "Options" || common.contains(h),
+                "`{cmd} -h` has the heading {h}, not one of {common:?}"
+            );
+        }
+        let under = |sections: &[(String, Vec<Entry>)], heading: &str| -> Vec<String> {
+            sections
+                .iter()
+                .filter(|(h, _)| h == heading)
+                .flat_map(|(_, e)| e.iter().map(|e| e.name.clone()))
+                .collect()
+        };
+        assert!(under(&short_sections, "Inputs").contains(&positional.to_string()));
+        assert!(under(&short_sections, "Outputs").contains(&"--output".to_string()));
+
+        // -h: one line per option (two when clap puts the description under a long name).
+        for (heading, entries) in &short_sections {
+            for e in entries {
+                let beside = e.lines[0].trim().contains("  ");
+                let allowed = if beside { 1 } else { 2 };
+                assert!(
+                    e.lines.len() == allowed,
+                    "`{cmd} -h`: {} under {heading} takes {} lines:\n{}",
+                    e.name,
+                    e.lines.len(),
+                    e.lines.join("\n")
+                );
+            }
+        }
+
+        // --help: everything, the options -h hides under headings -h does not have.
+        let short_names: Vec<String> = short_sections
+            .iter()
+            .flat_map(|(_, e)| e.iter().map(|e| e.name.clone()))
+            .collect();
+        let mut hidden = Vec::new();
+        for (heading, entries) in &long_sections {
+            for e in entries {
+                if short_names.contains(&e.name) {
+                    assert!(
+                        under(&short_sections, heading).contains(&e.name),
+                        "`{cmd}`: {} is under {heading} in --help only",
+                        e.name
+                    );
+                } else {
+                    assert!(
+                        !headings.contains(&heading.as_str()),
+                        "`{cmd} --help` lists {}, hidden by -h, under the common heading {heading}",
+                        e.name
+                    );
+                    hidden.push(e.name.clone());
+                }
+            }
+        }
+        let long_names: Vec<String> = long_sections
+            .iter()
+            .flat_map(|(_, e)| e.iter().map(|e| e.name.clone()))
+            .collect();
+        for name in &short_names {
+            assert!(long_names.contains(name), "`{cmd} --help` lacks {name}");
+        }
+        for name in must_hide.iter() {
+            assert!(
+                hidden.contains(&name.to_string()),
+                "`{cmd}`: {name} should be in --help only; hidden: {hidden:?}"
+            );
+        }
+
+        // The examples paste, on an 80-column terminal too.
+        for text in [
+            short.clone(),
+            long.clone(),
+            help_text(&[cmd, "-h"], 80),
+            help_text(&[cmd, "--help"], 80),
+        ] {
+            let commands = example_commands(&text);
+            assert!(
+                commands.iter().any(|c| c == vendor_example),
+                "`{cmd}`: no `{vendor_example}` among {commands:#?}"
+            );
+            assert!(
+                text.contains("\n  D=../shared/data/dfc2019-jax068-dev\n"),
+                "{text}"
+            );
+            for c in &commands {
+                assert!(c.starts_with(&format!("seasonstereo {cmd} ")), "{c}");
+                for word in c.split_whitespace() {
+                    assert!(!word.starts_with('/'), "an absolute path in `{c}`");
+                    if let Some(flag) = word.strip_prefix("--") {
+                        let flag = format!("--{}", flag.split('=').next().unwrap());
+                        assert!(long_names.contains(&flag), "`{c}`: no option {flag}");
+                    }
+                }
+            }
+        }
+        // The long epilogue also shows a run on the truth's grid, scored against it.
+        assert!(
+            example_commands(&long)
+                .iter()
+                .any(|c| c.contains("--truth")),
+            "`{cmd} --help` has no example scored against the truth"
+        );
+    }
+
+    // The top level: the commands under headings, one line each, on one screen.
+    let top = help_text(&["-h"], 100);
+    assert!(top.lines().count() <= 60, "{top}");
+    for c in ["reconstruct", "reconstruct-many", "demo", "train", "jobs"] {
+        let line = top
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(c))
+            .unwrap_or_else(|| panic!("`seasonstereo -h` lacks {c}:\n{top}"));
+        assert!(line.len() <= 100, "{line}");
+    }
+    assert!(top.contains("\nSatellite images to DSMs:\n"), "{top}");
+}

@@ -10,71 +10,110 @@ use jobs::script::{quote, split};
 use seasonstereo::{chain_status, resubmit_slurm_chain, submit_slurm_chain, ChainRequest};
 use seasonstereo::{ChainStatus, ChainSubmitted, StageLine};
 
-pub const AFTER_HELP: &str = "The stages, each sharded --shards ways (`--shard I/N`, finished \
-    items skipped, files written atomically), with WORK's folders between them:\n  \
-    teacher    --pairs PAIRS -o WORK/teacher                    [--teacher-args]\n  \
-    curate     --pairs PAIRS --teacher WORK/teacher -o WORK/curate [--curate-args]\n  \
-    synthesize --pairs PAIRS --raw RAW --selected WORK/curate/selected.txt -o WORK/synthetic \
-    [--synthesize-args]\n  \
-    masks      --images WORK/synthetic/cropped -o WORK/masks     [--masks-args]\n  \
-    dataset build --pairs PAIRS --selected WORK/curate/selected.txt --synthetic WORK/synthetic \
-    --masks WORK/masks --teacher WORK/teacher -o OUT [--build-args]\n  \
-    finalize: the same `dataset build` once, unsharded (every pair skipped; the lists and \
-    manifest.json).\n\
-    Each line is checked by this command's parser before anything is submitted.\n\n\
-    WORK/jobs/ holds the scripts (<stage>.sh, check-<stage>.sh), logs/, shards/<stage>/<I>.exit \
+use crate::args::heading::{CLUSTER, INPUTS, OUTPUTS};
+
+/// The example, ending both `-h` and `--help`.
+macro_rules! example {
+    () => {
+        "Example:
+  seasonstereo jobs slurm dataset --pairs data/synchronic_only --raw data/raw \\
+      --work work -o data/diachronic-stereo-synthetic --shards 16 \\
+      --curate-args \"--keep 1000\" \\
+      --sbatch-args \"--cpus-per-task=8 --mem=32G --time=04:00:00\"
+Then: seasonstereo jobs status --work work (per-stage shards);
+      seasonstereo jobs resubmit --work work"
+    };
+}
+
+/// `jobs slurm dataset -h`'s epilogue.
+pub const AFTER_HELP: &str = example!();
+
+/// `jobs slurm dataset --help`'s epilogue: the stages, the job's files, the example.
+pub const AFTER_LONG_HELP: &str = concat!(
+    "The stages, each sharded --shards ways (`--shard I/N`, finished items skipped, files \
+    written atomically), with WORK's folders between them:
+  teacher       --pairs PAIRS -o WORK/teacher [--teacher-args]
+  curate        --pairs PAIRS --teacher WORK/teacher -o WORK/curate [--curate-args]
+  synthesize    --pairs PAIRS --raw RAW --selected WORK/curate/selected.txt
+                -o WORK/synthetic [--synthesize-args]
+  masks         --images WORK/synthetic/cropped -o WORK/masks [--masks-args]
+  dataset build --pairs PAIRS --selected WORK/curate/selected.txt --synthetic WORK/synthetic
+                --masks WORK/masks --teacher WORK/teacher -o OUT [--build-args]
+  finalize:     the same `dataset build` once, unsharded (every pair skipped; the lists and
+                manifest.json).
+Each line is checked by this command's parser before anything is submitted.
+
+WORK/jobs/ holds the scripts (<stage>.sh, check-<stage>.sh), logs/, shards/<stage>/<I>.exit \
     (each task's exit code; none = not run or killed) and chain.json. WORK, the binary and the \
-    inputs must be on a file system every node sees.\n\n\
-    Example:\n  seasonstereo jobs slurm dataset --pairs data/synchronic_only --raw data/raw \
-    --work work -o data/diachronic-stereo-synthetic --shards 16 --curate-args \"--keep 1000\" \\\n    \
-    --sbatch-args \"--cpus-per-task=8 --mem=32G --time=04:00:00\"\nThen: seasonstereo jobs status \
-    --work work (per-stage shards); seasonstereo jobs resubmit --work work";
+    inputs must be on a file system every node sees.
+
+",
+    example!()
+);
+
+/// The headings of the job's options.
+const STAGE_OPTIONS: &str = "Stages' options";
 
 #[derive(Args)]
 pub struct SlurmDatasetArgs {
-    /// Synchronic pairs folder (L/, R/, homography/), read by teacher, curate, synthesize and
-    /// dataset build.
-    #[arg(long, value_name = "DIR")]
+    /// Synchronic pairs folder (L/, R/, homography/).
+    ///
+    /// Read by teacher, curate, synthesize and dataset build.
+    #[arg(long, value_name = "DIR", help_heading = INPUTS)]
     pairs: PathBuf,
-    /// Folder of the raw images (searched recursively by image id), read by synthesize.
-    #[arg(long, value_name = "DIR")]
+    /// Folder of the raw images, read by synthesize.
+    ///
+    /// Searched recursively by image id.
+    #[arg(long, value_name = "DIR", help_heading = INPUTS)]
     raw: PathBuf,
-    /// Work folder: the stages' outputs (teacher/, curate/, synthetic/, masks/) and jobs/.
-    #[arg(long, value_name = "DIR")]
+    /// Work folder: the stages' outputs and jobs/.
+    ///
+    /// teacher/, curate/, synthetic/, masks/ and jobs/ (the scripts, logs and markers).
+    #[arg(long, value_name = "DIR", help_heading = OUTPUTS)]
     work: PathBuf,
     /// The training set (dataset build's output folder).
-    #[arg(short, long, value_name = "DIR")]
+    #[arg(short, long, value_name = "DIR", help_heading = OUTPUTS)]
     output: PathBuf,
-    /// Array tasks per stage (`--shard I/N`, I = the task's index).
-    #[arg(long, value_name = "N", default_value_t = 16)]
+    /// Array tasks per stage (each runs `--shard I/N`).
+    #[arg(long, value_name = "N", default_value_t = 16, help_heading = CLUSTER)]
     shards: usize,
-    /// More `teacher` options as one string, e.g. "--model monsterpp --weights m.pth".
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    /// More `teacher` options as one string, e.g. "--model monsterpp".
+    ///
+    /// For instance "--model monsterpp --weights m.pth".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = STAGE_OPTIONS)]
     teacher_args: Option<String>,
     /// More `curate` options as one string, e.g. "--keep 1000".
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = STAGE_OPTIONS)]
     curate_args: Option<String>,
-    /// More `synthesize` options as one string, e.g. "--generator gemini --prompts s.toml".
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    /// More `synthesize` options as one string, e.g. "--generator gemini".
+    ///
+    /// For instance "--generator gemini --prompts s.toml".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = STAGE_OPTIONS)]
     synthesize_args: Option<String>,
     /// More `masks` options as one string, e.g. "--segformer mit-b2.pt".
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = STAGE_OPTIONS)]
     masks_args: Option<String>,
-    /// More `dataset build` options (also of the finalize pass) as one string, e.g. "--seed 3".
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    /// More `dataset build` options as one string (also of the finalize pass).
+    ///
+    /// For instance "--seed 3".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = STAGE_OPTIONS)]
     build_args: Option<String>,
-    /// More sbatch options for every job, as one string (partition, account, time limit, CPUs,
-    /// memory, GPUs), e.g. "-p long --cpus-per-task=8 --mem=32G"; after ours, so they win.
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    /// More sbatch options for every job, as one string (they win over ours).
+    ///
+    /// Partition, account, time limit, CPUs, memory, GPUs, e.g. "-p long --cpus-per-task=8
+    /// --mem=32G".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = CLUSTER)]
     sbatch_args: Option<String>,
-    /// sbatch options of one stage's tasks only, STAGE=ARGS (teacher, curate, synthesize,
-    /// masks, build, finalize), after --sbatch-args so they win; repeat for several stages,
-    /// e.g. --stage-sbatch-args "teacher=--gres=gpu:1 -p gpu".
-    #[arg(long, value_name = "STAGE=ARGS", allow_hyphen_values = true)]
+    /// sbatch options of one stage's tasks only (repeat for several stages).
+    ///
+    /// STAGE is teacher, curate, synthesize, masks, build or finalize; they come after
+    /// --sbatch-args, so they win; e.g. --stage-sbatch-args "teacher=--gres=gpu:1 -p gpu".
+    #[arg(long, value_name = "STAGE=ARGS", allow_hyphen_values = true, help_heading = CLUSTER)]
     stage_sbatch_args: Vec<String>,
-    /// Block until the finalize pass ends; exit 0 when it succeeded, else 2 naming the failed
-    /// shards.
-    #[arg(long)]
+    /// Block until the finalize pass ends; exit 0 if it succeeded, else 2.
+    ///
+    /// Exit code 2 names the failed shards.
+    #[arg(long, help_heading = CLUSTER)]
     wait: bool,
 }
 

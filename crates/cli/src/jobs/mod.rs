@@ -26,45 +26,67 @@ pub struct JobsArgs {
 
 #[derive(Subcommand)]
 enum JobsCommand {
-    /// Submit to Slurm (sbatch): `jobs slurm reconstruct <reconstruct arguments>` or `jobs slurm
-    /// dataset <the training-set stages' folders and options>`.
+    /// Submit to Slurm (sbatch): a reconstruction or the training-set stages.
+    ///
+    /// `jobs slurm reconstruct <reconstruct arguments>` or `jobs slurm dataset <the training-set
+    /// stages' folders and options>`.
     #[command(subcommand)]
     Slurm(SlurmCommand),
+    /// The state of a submission: done, failed and missing tiles or shards.
+    ///
     /// The tiles (reconstruct) or each stage's shards (dataset) of a submission: done, failed
     /// (with their errors) and missing, and the command that resubmits only the failed ones.
     /// Exit code 2 while some are failed or missing.
     Status(StatusArgs),
-    /// Submit again only the array tasks whose tiles failed or are missing, then the merge; for
-    /// a dataset job, the failed and missing shards of the first unfinished stage, then every
-    /// later stage (finished items are skipped).
+    /// Submit again only what failed or is missing.
+    ///
+    /// The array tasks whose tiles failed or are missing, then the merge; for a dataset job,
+    /// the failed and missing shards of the first unfinished stage, then every later stage
+    /// (finished items are skipped).
     Resubmit(ResubmitArgs),
 }
 
 #[derive(Subcommand)]
 enum SlurmCommand {
-    /// Plan the tiles, write the job scripts into the work folder (every argument quoted) and
-    /// submit an array of tile tasks sized to the plan plus a merge task after them
+    /// Submit a `reconstruct` as a Slurm array of tile tasks plus a merge.
+    ///
+    /// Plans the tiles, writes the job scripts into the work folder (every argument quoted) and
+    /// submits an array of tile tasks sized to the plan plus a merge task after them
     /// (`afterany`), which refuses to write a DSM while tiles are failed (unless
     /// --allow-partial), naming them. Every `reconstruct` option is passed through as typed.
-    #[command(
-        after_help = "Example:\n  seasonstereo jobs slurm reconstruct left.tif \
-        right.tif --rpc-left l.json --rpc-right r.json -o dsm.tif --max-memory 6 \\\n    \
-        --sbatch-args \"-p long --time=04:00:00\" --wait\nThen: seasonstereo jobs status --work \
-        dsm_work"
-    )]
+    #[command(after_help = SLURM_RECONSTRUCT_HELP, after_long_help = SLURM_RECONSTRUCT_HELP)]
     Reconstruct(Box<SlurmReconstructArgs>),
-    /// The training-set build, one array job of --shards tasks per stage: teacher → curate →
-    /// synthesize → masks → dataset build, then one unsharded `dataset build` (lists and
-    /// manifest). Each stage's arguments are passed through exactly (shell-quoted job scripts in
-    /// WORK/jobs/); a check step after each stage (`afterany`) fails, naming the failed shards
-    /// and the resubmit command, unless all its shards exited 0, and the next stage runs
-    /// `afterok` on it with --kill-on-invalid-dep=yes: a failed shard cancels the rest of the
-    /// chain instead of leaving it pending.
-    #[command(after_help = dataset::AFTER_HELP)]
+    /// Submit the training-set build, one Slurm array per stage.
+    ///
+    /// One array job of --shards tasks per stage: teacher → curate → synthesize → masks →
+    /// dataset build, then one unsharded `dataset build` (lists and manifest). Each stage's
+    /// arguments are passed through exactly (shell-quoted job scripts in WORK/jobs/); a check
+    /// step after each stage (`afterany`) fails, naming the failed shards and the resubmit
+    /// command, unless all its shards exited 0, and the next stage runs `afterok` on it with
+    /// --kill-on-invalid-dep=yes: a failed shard cancels the rest of the chain instead of
+    /// leaving it pending.
+    #[command(after_help = dataset::AFTER_HELP, after_long_help = dataset::AFTER_LONG_HELP)]
     Dataset(Box<dataset::SlurmDatasetArgs>),
 }
 
+/// `jobs slurm reconstruct`'s epilogue, for `-h` and `--help` alike (it replaces
+/// `reconstruct`'s).
+const SLURM_RECONSTRUCT_HELP: &str = "\
+Example:
+  seasonstereo jobs slurm reconstruct left.tif right.tif -o dsm.tif \\
+      --rpc-left l.json --rpc-right r.json --max-memory 6 \\
+      --sbatch-args \"-p long --time=04:00:00\" --wait
+Then: seasonstereo jobs status --work dsm_work
+
+The reconstruct options: seasonstereo reconstruct --help";
+
 #[derive(Args)]
+#[command(
+    // Each task sets these itself (refused on this command line): not listed.
+    mut_arg("shard", |a| a.hide(true)),
+    mut_arg("merge", |a| a.hide(true)),
+    mut_arg("tiles_only", |a| a.hide(true)),
+)]
 pub struct SlurmReconstructArgs {
     #[command(flatten)]
     job: JobOptions,
@@ -75,21 +97,29 @@ pub struct SlurmReconstructArgs {
 /// The job's own options, read anywhere on the line and not passed to `reconstruct`.
 #[derive(Args)]
 struct JobOptions {
-    /// More sbatch options as one string (partition, account, time limit, GPUs), e.g.
-    /// "-p long --time=04:00:00 --gres=gpu:1"; they come after ours, so they win.
-    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    /// More sbatch options as one string; they come after ours, so they win.
+    ///
+    /// Partition, account, time limit, GPUs, e.g. "-p long --time=04:00:00 --gres=gpu:1".
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true, help_heading = SLURM)]
     sbatch_args: Option<String>,
-    /// Tiles per array task (the array has ceil(tiles / N) tasks). Default: the CPUs of a task.
-    #[arg(long, value_name = "N")]
+    /// Tiles per array task (default: the CPUs of a task).
+    ///
+    /// The array has ceil(tiles / N) tasks.
+    #[arg(long, value_name = "N", help_heading = SLURM)]
     tiles_per_task: Option<usize>,
-    /// CPUs of a tile task. Default: as many tiles as fit in --max-memory at once, at most the
-    /// largest node's CPUs (sinfo).
-    #[arg(long, value_name = "N")]
+    /// CPUs of a tile task (default: the tiles that fit in --max-memory).
+    ///
+    /// Default: as many as tiles fit in --max-memory at once, at most the largest node's CPUs
+    /// (sinfo).
+    #[arg(long, value_name = "N", help_heading = SLURM)]
     cpus_per_task: Option<usize>,
     /// Block until the merge ends and exit with its exit code.
-    #[arg(long)]
+    #[arg(long, help_heading = SLURM)]
     wait: bool,
 }
+
+/// The heading of the job's own options.
+const SLURM: &str = "Slurm";
 
 #[derive(Args)]
 pub struct WorkArg {
