@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use numpy::PyArray2;
 use pyo3::prelude::*;
-use seasonstereo::{flags, DsmOptions, RectifyOptions, Roi};
+use seasonstereo::{flags, DsmOptions, Finishing, RectifyOptions, Roi};
 
 use crate::arrays::to_numpy;
 use crate::errors::{compute, exception, value_error};
@@ -80,9 +80,12 @@ pub fn dsm<'py>(
         rpc_right,
         grid: flags::grid(like, resolution, bounds, epsg),
         border,
-        gridding: flags::gridding(gridding).map_err(exception)?,
-        fill_holes: flags::fill_cells(fill_holes),
-        median_filter: flags::median_cells(median_filter),
+        finishing: Finishing::new(
+            flags::gridding(gridding).map_err(exception)?,
+            flags::fill_cells(fill_holes),
+            None,
+            flags::median_cells(median_filter),
+        ),
         output: out.clone(),
         compare: None,
     };

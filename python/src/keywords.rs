@@ -7,7 +7,7 @@ use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use seasonstereo::flags::{self, ClassicalFlags};
-use seasonstereo::Gridding;
+use seasonstereo::Finishing;
 
 use crate::errors::{exception, value_error};
 
@@ -100,23 +100,30 @@ impl<'py> Keywords<'py> {
         }
     }
 
-    /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none) over
-    /// the given defaults: how a DSM is made from its points, in every command that makes one.
-    pub fn finishing(
-        &self,
-        gridding: &mut Gridding,
-        fill_holes: &mut Option<usize>,
-        median_filter: &mut Option<usize>,
-    ) -> PyResult<()> {
+    /// `gridding` ("median" or "max"), `fill_holes` and `median_filter` (cells, 0 = none), and
+    /// with `reach` `fill_reach` (cells), over the given defaults: how a DSM is made from its
+    /// points, in every command that makes one. Without `reach` the filling has none (its rays'
+    /// length).
+    pub fn finishing(&self, finishing: &mut Finishing, reach: bool) -> PyResult<()> {
+        let mut gridding = finishing.gridding;
         if let Some(g) = self.take::<String>("gridding")? {
-            *gridding = flags::gridding(&g).map_err(exception)?;
+            gridding = flags::gridding(&g).map_err(exception)?;
         }
-        if let Some(cells) = self.take("fill_holes")? {
-            *fill_holes = flags::fill_cells(cells);
-        }
-        if let Some(cells) = self.take("median_filter")? {
-            *median_filter = flags::median_cells(cells);
-        }
+        let fill_holes = match self.take("fill_holes")? {
+            Some(cells) => flags::fill_cells(cells),
+            None => finishing.fill_holes.map(|f| f.span),
+        };
+        let fill_reach = match reach {
+            true => self
+                .take("fill_reach")?
+                .or(finishing.fill_holes.map(|f| f.reach)),
+            false => None,
+        };
+        let median_filter = match self.take("median_filter")? {
+            Some(cells) => flags::median_cells(cells),
+            None => finishing.median_filter,
+        };
+        *finishing = Finishing::new(gridding, fill_holes, fill_reach, median_filter);
         Ok(())
     }
 

@@ -78,7 +78,7 @@ fn many_options(
     o.min_confidence = k.take("min_confidence")?;
     o.co_register = k.take("register")?.unwrap_or(false);
     o.weight_pairs = k.take("pair_weights")?.unwrap_or(false);
-    k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
+    k.finishing(&mut o.finishing, false)?;
     if let Some(cells) = k.take("pair_median_filter")? {
         o.pair_median_filter = flags::median_cells(cells);
     }

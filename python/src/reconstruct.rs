@@ -64,10 +64,7 @@ fn reconstruct_options(
     o.alt_range = k.take::<[f64; 2]>("alt_range")?.map(|[lo, hi]| (lo, hi));
     o.work_dir = k.path("work")?;
     o.truth = k.path("truth")?;
-    k.finishing(&mut o.gridding, &mut o.fill_holes, &mut o.median_filter)?;
-    if let Some(cells) = k.take("fill_reach")? {
-        o.fill_reach = cells;
-    }
+    k.finishing(&mut o.finishing, true)?;
     k.tiling(&mut o.tile, &mut o.collar, &mut o.max_memory)?;
     o.both_views = !k.take("single_view")?.unwrap_or(false);
     o.adjust_pointing = !k.take("no_pointing_correction")?.unwrap_or(false);

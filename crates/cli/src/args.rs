@@ -9,16 +9,15 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use camera::rectify::Roi;
 use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
-use dataset::Shard;
-use matching::SgmParams;
-use nn::device::DeviceChoice;
-use reconstruct::dsm::GridChoice;
-use reconstruct::flags::{census_window, format_census, ClassicalFlags};
-use workflow::matcher::{Matcher, MonsterOptions};
-use workflow::stage::BatchSummary;
+use seasonstereo::defaults;
+use seasonstereo::flags::{self, census_window, format_census, ClassicalFlags};
+use seasonstereo::stages::BatchSummary;
+use seasonstereo::{
+    Aggregation, DeviceChoice, GridChoice, Gridding, Matcher, MonsterOptions, Normalisation, Roi,
+    SgmParams, Shard,
+};
 
 /// The headings of the options in `-h` and `--help`. The first six group what most runs need
 /// (all that `reconstruct -h` shows); the others the tuning knobs, which `reconstruct -h` leaves
@@ -56,10 +55,10 @@ pub enum Method {
 }
 
 impl Method {
-    pub fn aggregation(self) -> matching::Aggregation {
+    pub fn aggregation(self) -> Aggregation {
         match self {
-            Method::Mgm => matching::Aggregation::Mgm,
-            Method::Sgm => matching::Aggregation::Sgm,
+            Method::Mgm => Aggregation::Mgm,
+            Method::Sgm => Aggregation::Sgm,
         }
     }
 }
@@ -80,11 +79,11 @@ pub enum GriddingArg {
     Median,
 }
 
-impl From<GriddingArg> for camera::Gridding {
+impl From<GriddingArg> for Gridding {
     fn from(g: GriddingArg) -> Self {
         match g {
-            GriddingArg::Max => camera::Gridding::Max,
-            GriddingArg::Median => camera::Gridding::Median,
+            GriddingArg::Max => Gridding::Max,
+            GriddingArg::Median => Gridding::Median,
         }
     }
 }
@@ -146,9 +145,9 @@ pub struct NetworkArgs {
     /// as-is (0–255 data), percentile (2–98th percentile of each image → 0–255, for uint16
     /// imagery) or percentile:LO:HI.
     #[arg(long, value_name = "MODE", default_value = "as-is",
-          value_parser = nn::infer::Normalisation::parse,
+          value_parser = Normalisation::parse,
           help_heading = heading::MATCHING, hide_short_help = true)]
-    normalise: nn::infer::Normalisation,
+    normalise: Normalisation,
     /// Peak memory of one network pass, GiB.
     ///
     /// Larger pairs are cut into strips of rows.
@@ -159,7 +158,7 @@ pub struct NetworkArgs {
     #[arg(long, value_name = "ROWS", help_heading = heading::MATCHING, hide_short_help = true)]
     strip_rows: Option<usize>,
     /// Overlap of consecutive strips, rows (blended linearly).
-    #[arg(long, value_name = "ROWS", default_value_t = nn::infer::DEFAULT_TILE_OVERLAP,
+    #[arg(long, value_name = "ROWS", default_value_t = defaults::NETWORK_TILE_OVERLAP,
           help_heading = heading::MATCHING, hide_short_help = true)]
     strip_overlap: usize,
     #[command(flatten)]
@@ -259,7 +258,7 @@ fn parse_census(s: &str) -> Result<String, String> {
 
 impl SgmArgs {
     /// The classical matcher's parameters with `aggregation`.
-    pub fn params(&self, aggregation: matching::Aggregation) -> Result<SgmParams> {
+    pub fn params(&self, aggregation: Aggregation) -> Result<SgmParams> {
         ClassicalFlags {
             method: aggregation,
             p1: self.p1,
@@ -412,21 +411,21 @@ pub struct TilingArgs {
     ///
     /// Each tile is rectified, matched and triangulated on its own (an affine rectification
     /// holds only over a small area) and the tiles are merged.
-    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_TILE,
+    #[arg(long, value_name = "PX", default_value_t = defaults::TILE,
           value_parser = parse_tile, help_heading = heading::PERFORMANCE)]
     pub tile: usize,
     /// Overlap collar around each tile, pixels.
     ///
     /// Context for the matcher: only the points of each tile's core are kept, so the collar
     /// never shows as a seam.
-    #[arg(long, value_name = "PX", default_value_t = reconstruct::options::DEFAULT_COLLAR,
+    #[arg(long, value_name = "PX", default_value_t = defaults::COLLAR,
           help_heading = heading::PERFORMANCE)]
     pub collar: usize,
     /// Memory budget of the process, GiB.
     ///
     /// Each tile's peak memory is estimated before it runs and only as many tiles as fit run
     /// at once (at most one per core).
-    #[arg(long, value_name = "GIB", default_value_t = reconstruct::options::DEFAULT_MEMORY_GIB,
+    #[arg(long, value_name = "GIB", default_value_t = defaults::MEMORY_GIB,
           help_heading = heading::PERFORMANCE)]
     pub max_memory: f64,
 }
@@ -434,7 +433,7 @@ pub struct TilingArgs {
 impl TilingArgs {
     /// The memory budget in bytes.
     pub fn max_memory_bytes(&self) -> Result<u64> {
-        reconstruct::flags::memory_bytes(self.max_memory)
+        flags::memory_bytes(self.max_memory)
     }
 }
 
@@ -453,7 +452,7 @@ pub struct GridArgs {
     /// Without --like; the grid then covers the scene. In a CRS whose unit is not a ground metre
     /// (degrees, Web Mercator, feet) it is converted at the scene's centre; the log says the
     /// size in the CRS's unit.
-    #[arg(long, value_name = "M", default_value_t = reconstruct::flags::RESOLUTION,
+    #[arg(long, value_name = "M", default_value_t = flags::RESOLUTION,
           value_parser = parse_resolution, help_heading = heading::REGION)]
     pub resolution: f64,
     /// EPSG code of the DSM's CRS (default: the scene's UTM zone).
@@ -468,7 +467,7 @@ pub struct GridArgs {
 impl GridArgs {
     /// The library's grid choice.
     pub fn choice(&self) -> GridChoice {
-        reconstruct::flags::grid(self.like.clone(), self.resolution, None, self.epsg)
+        flags::grid(self.like.clone(), self.resolution, None, self.epsg)
     }
 }
 
@@ -543,6 +542,21 @@ impl ProductArgs {
                 HeightsArg::Egm96 => seasonstereo::Heights::Egm96,
             },
         }
+    }
+}
+
+/// The closing lines of `reconstruct` and `reconstruct-many`: the products written (when any
+/// were asked for) and the DSM's scores against the truth (with `--truth`).
+pub fn print_products_and_scores(
+    products: &seasonstereo::Products,
+    written: Option<&seasonstereo::ProductsWritten>,
+    scores: Option<&seasonstereo::DsmScores>,
+) {
+    if let Some(written) = written {
+        println!("{}", products_line(products, written));
+    }
+    if let Some(sc) = scores {
+        println!("vs truth: {}", crate::score::format_scores(sc));
     }
 }
 

@@ -3,7 +3,7 @@
 use std::sync::Mutex;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use workflow::Progress;
+use seasonstereo::Progress;
 
 /// One bar per loop of the running stage.
 #[derive(Default)]

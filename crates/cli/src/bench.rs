@@ -7,6 +7,10 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use clap::{Args, ValueEnum};
+use seasonstereo::bench::{
+    dinov3, median, monster, peak_rss_bytes, segformer, step_config, train_step, Device, GroupTime,
+    Recording, Workload,
+};
 
 use crate::args::DeviceArg;
 
@@ -103,9 +107,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
         None
     };
     let timing = Timing {
-        median: eval::aggregate::median(&times).expect("at least one run"),
+        median: median(&times).expect("at least one run"),
         min: times.iter().copied().fold(f64::INFINITY, f64::min),
-        peak_mib: train::metrics::peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64),
+        peak_mib: peak_rss_bytes().map(|b| b as f64 / (1u64 << 20) as f64),
         warmup,
         times,
     };
@@ -148,16 +152,14 @@ impl BenchShape {
     }
 
     /// The pass to time, with random weights on `device`.
-    fn workload(&self, a: &BenchArgs, device: &nn::device::Device) -> Result<nn::bench::Workload> {
+    fn workload(&self, a: &BenchArgs, device: &Device) -> Result<Workload> {
         let (p, h, w) = (self.preset.as_str(), self.height, self.width);
         match a.workload {
-            BenchWorkload::Monsterpp => nn::bench::monster(p, h, w, self.iters, a.max_disp, device),
-            BenchWorkload::Segformer => nn::bench::segformer(p, h, device),
-            BenchWorkload::Dinov3 => nn::bench::dinov3(p, h, self.batch, device),
-            BenchWorkload::TrainStep => {
-                train::bench::step_config(p, h, w, self.batch, self.iters, a.max_disp)
-                    .and_then(|c| train::bench::train_step(&c, device))
-            }
+            BenchWorkload::Monsterpp => monster(p, h, w, self.iters, a.max_disp, device),
+            BenchWorkload::Segformer => segformer(p, h, device),
+            BenchWorkload::Dinov3 => dinov3(p, h, self.batch, device),
+            BenchWorkload::TrainStep => step_config(p, h, w, self.batch, self.iters, a.max_disp)
+                .and_then(|c| train_step(&c, device)),
             BenchWorkload::Merge => unreachable!("bench merge runs before the networks' shapes"),
         }
         .map_err(|e| anyhow!("{e}"))
@@ -184,23 +186,23 @@ struct Timing {
 }
 
 /// A profiled run's total time and its module groups, the rest as "other".
-type Profile = (f64, Vec<nn::profile::GroupTime>);
+type Profile = (f64, Vec<GroupTime>);
 
 /// Seconds of one run of `work`.
-fn timed(work: &mut nn::bench::Workload) -> Result<f64> {
+fn timed(work: &mut Workload) -> Result<f64> {
     let t = Instant::now();
     work().map_err(|e| anyhow!("{e}"))?;
     Ok(t.elapsed().as_secs_f64())
 }
 
 /// One more run with the time of every module group.
-fn profiled(work: &mut nn::bench::Workload, device: &nn::device::Device) -> Result<Profile> {
-    let recording = nn::profile::Recording::start(device)
-        .ok_or_else(|| anyhow!("another profile is already recording"))?;
+fn profiled(work: &mut Workload, device: &Device) -> Result<Profile> {
+    let recording =
+        Recording::start(device).ok_or_else(|| anyhow!("another profile is already recording"))?;
     let total = timed(work)?;
     let mut groups = recording.finish();
     let covered: f64 = groups.iter().map(|g| g.seconds).sum();
-    groups.push(nn::profile::GroupTime {
+    groups.push(GroupTime {
         group: "other",
         seconds: (total - covered).max(0.0),
         calls: 0,

@@ -4,8 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use stages::curate::{self, features, ColourStatistic, CurateOptions, SsimScale};
-use workflow::Progress;
+use seasonstereo::defaults::DINOV3_NORMALISATION;
+use seasonstereo::stages::{
+    curate, ColourStatistic, CurateOptions, Dinov3Similarity, FeatureSimilarity,
+    HistogramDescriptor, Keep, SsimScale,
+};
+use seasonstereo::Progress;
 
 use crate::args::{report, DeviceArg, ShardArg};
 
@@ -51,8 +55,8 @@ pub struct CurateArgs {
     output: PathBuf,
     /// Pairs kept by each ranking: a count (1000, the paper's K of 1,565 pairs), a percentage
     /// (64%) or a fraction (0.64).
-    #[arg(long, value_name = "K", default_value = "64%", value_parser = curate::select::Keep::parse)]
-    keep: curate::select::Keep,
+    #[arg(long, value_name = "K", default_value = "64%", value_parser = Keep::parse)]
+    keep: Keep,
     /// Which statistic of the per-pixel colour distances is d_color.
     #[arg(long, value_enum, default_value_t = ColourArg::Mean)]
     colour_distance: ColourArg,
@@ -67,12 +71,7 @@ pub struct CurateArgs {
     #[arg(long, value_name = "PRESET", requires = "dinov3")]
     dinov3_config: Option<String>,
     /// DINOv3 input normalisation: imagenet (the HF processor's default) or sat493m.
-    #[arg(
-        long,
-        value_name = "NAME",
-        default_value = "imagenet",
-        requires = "dinov3"
-    )]
+    #[arg(long, value_name = "NAME", default_value = DINOV3_NORMALISATION, requires = "dinov3")]
     dinov3_normalisation: String,
     #[command(flatten)]
     device: DeviceArg,
@@ -83,7 +82,7 @@ pub struct CurateArgs {
 pub fn run(a: CurateArgs, progress: &dyn Progress) -> Result<()> {
     let opts = a.options()?;
     println!("S_feat: {}", opts.features.name());
-    let s = curate::run_curate(&opts, progress)?;
+    let s = curate(&opts, progress)?;
     report("curate scoring", &s.scoring);
     match &s.ranking {
         Some(r) => println!(
@@ -107,14 +106,14 @@ pub fn run(a: CurateArgs, progress: &dyn Progress) -> Result<()> {
 impl CurateArgs {
     /// The stage's options for these flags (the DINOv3 weights loaded when given).
     fn options(self) -> Result<CurateOptions> {
-        let features: Box<dyn features::FeatureSimilarity> = match &self.dinov3 {
-            Some(w) => Box::new(features::Dinov3Similarity::load(
+        let features: Box<dyn FeatureSimilarity> = match &self.dinov3 {
+            Some(w) => Box::new(Dinov3Similarity::load(
                 w,
                 self.dinov3_config.as_deref(),
                 &self.dinov3_normalisation,
                 self.device.device,
             )?),
-            None => Box::new(features::HistogramDescriptor),
+            None => Box::new(HistogramDescriptor),
         };
         Ok(CurateOptions {
             pairs_dir: self.pairs,

@@ -4,12 +4,11 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
-use dataset::Subset;
-use stages::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
-use stages::world_training::{
-    build_world_training, WorldTrainingOptions, WorldTrainingSummary,
+use seasonstereo::stages::{
+    dataset_build, world_training, BuildOptions, BuildSummary, MaskDirs, Subset,
+    WorldTrainingOptions, WorldTrainingSummary,
 };
-use workflow::Progress;
+use seasonstereo::{Aggregation, Progress};
 
 use crate::args::{SgmArgs, ShardArg};
 
@@ -164,12 +163,12 @@ fn print_build(split: &str, s: &BuildSummary, out: &std::path::Path) {
 pub fn run(a: DatasetArgs, progress: &dyn Progress) -> Result<()> {
     match a.command {
         DatasetCommand::Build(b) => {
-            let s = run_build(&b.options()?, progress)?;
+            let s = dataset_build(&b.options()?, progress)?;
             print_build(&b.split, &s, &b.output);
             failed_pairs(&s)?;
         }
         DatasetCommand::World(w) => {
-            let s = build_world_training(&w.options()?, progress)?;
+            let s = world_training(&w.options()?, progress)?;
             print_world(&w, &s);
         }
     }
@@ -181,17 +180,9 @@ fn failed_pairs(s: &BuildSummary) -> Result<()> {
     for (pair, cause) in &s.failed {
         eprintln!("warning: pair {pair} failed: {cause}");
     }
-    if s.failed.is_empty() {
-        return Ok(());
-    }
     let names = s.failed.iter().map(|(p, _)| p.clone()).collect();
     let total = s.pairs_in_shard;
-    Err(crate::exit::partial(
-        "pairs",
-        total,
-        names,
-        "fix them and rerun the same command",
-    ))
+    crate::exit::partial_if_any("pairs", total, names, "fix them and rerun the same command")
 }
 
 impl BuildArgs {
@@ -231,7 +222,7 @@ impl WorldArgs {
         opts.generator_seed = self.generator_seed;
         opts.subset_seed = self.subset_seed;
         opts.previews = self.preview;
-        opts.sgm = self.sgm.params(matching::Aggregation::Mgm)?;
+        opts.sgm = self.sgm.params(Aggregation::Mgm)?;
         Ok(opts)
     }
 }

@@ -1,13 +1,16 @@
 //! `seasonstereo demo` and `demo --ablation`: arguments and what the terminal prints (the work is
-//! in `demo`).
+//! in the library's `seasonstereo::demo`).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use demo::ablation::{run_ablation, AblationOptions};
-use demo::{metres, percent, pixels, run_demo, DemoOptions};
-use workflow::Progress;
+use seasonstereo::demo::{
+    metres, percent, pixels, run_ablation, run_demo, AblationOptions, DemoOptions, DemoSummary,
+    ManyDatesResult,
+};
+use seasonstereo::train::ValidationRecord;
+use seasonstereo::{Aggregation, Progress};
 
 #[derive(Args)]
 pub struct DemoArgs {
@@ -50,9 +53,14 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
         size: a.size.unwrap_or(512),
         seed: a.seed,
         out_dir: a.output.unwrap_or_else(|| "out/demo".into()),
-        sgm: a.sgm.params(matching::Aggregation::Mgm)?,
+        sgm: a.sgm.params(Aggregation::Mgm)?,
     };
-    let s = run_demo(&opts, progress)?;
+    print_demo(&run_demo(&opts, progress)?);
+    Ok(())
+}
+
+/// What the demo measured: the disparities, each pair's DSM, the many-date fusion, the report.
+fn print_demo(s: &DemoSummary) {
     let v = &s.visible;
     println!(
         "disparity range {}..{} px (from the cameras); on pixels visible in both views: coverage {}, MAE {}, bad-1 {}, bad-2 {}",
@@ -76,7 +84,13 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
             p.dsm.path.display()
         );
     }
-    let m = &s.many_dates;
+    print_many_dates(&s.many_dates);
+    let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
+    println!("report: {} ({total:.1} s)", s.report.display());
+}
+
+/// The many-date fusion against the best-scored pair alone.
+fn print_many_dates(m: &ManyDatesResult) {
     println!(
         "six dates ({}² px), {} pairs fused: DSM MAE {} filtered, coverage {}, within 1 m {}; the \
          best-scored pair alone ({}): {}, {}, {} ({})",
@@ -91,9 +105,6 @@ pub fn run(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
         percent(m.best_pair.1.within_1m),
         m.folder.display()
     );
-    let total: f64 = s.seconds.iter().map(|(_, t)| t).sum();
-    println!("report: {} ({total:.1} s)", s.report.display());
-    Ok(())
 }
 
 fn run_ablation_command(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
@@ -101,7 +112,7 @@ fn run_ablation_command(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
     for run in &s.runs {
         let c = &run.samples;
         let (first, last) = (run.validations.first(), run.validations.last());
-        let epe = |v: Option<&train::ValidationRecord>| {
+        let epe = |v: Option<&ValidationRecord>| {
             v.map_or("–".to_string(), |v| format!("{:.2} px", v.scores.epe))
         };
         println!(
@@ -127,7 +138,7 @@ fn run_ablation_command(a: DemoArgs, progress: &dyn Progress) -> Result<()> {
 fn ablation_options(a: DemoArgs) -> Result<AblationOptions> {
     let mut opts = AblationOptions::new(a.output.unwrap_or_else(|| "out/demo-ablation".into()));
     opts.seed = a.seed;
-    opts.sgm = a.sgm.params(matching::Aggregation::Mgm)?;
+    opts.sgm = a.sgm.params(Aggregation::Mgm)?;
     if let Some(n) = a.size {
         opts.size = n;
     }

@@ -4,8 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use reconstruct::dsm::{disparity_to_dsm, DsmOptions};
-use reconstruct::flags;
+use seasonstereo::{flags, DsmOptions};
 
 #[derive(Args)]
 pub struct DsmArgs {
@@ -84,14 +83,17 @@ pub fn run(a: DsmArgs) -> Result<()> {
         rpc_right: a.rpc_right,
         grid,
         border: a.border,
-        gridding: a.gridding.into(),
-        fill_holes: flags::fill_cells(a.fill_holes),
-        median_filter: flags::median_cells(a.median_filter),
+        finishing: seasonstereo::Finishing::new(
+            a.gridding.into(),
+            flags::fill_cells(a.fill_holes),
+            None,
+            flags::median_cells(a.median_filter),
+        ),
         output: a.output.clone(),
         compare: a.compare,
     };
     options.check_output(crate::exit::overwrite())?;
-    let s = disparity_to_dsm(&options)?;
+    let s = seasonstereo::dsm(&options)?;
     println!(
         "wrote {} ({}, {} points, {} cells filled)",
         a.output.display(),

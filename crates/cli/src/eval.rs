@@ -4,10 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use matching::Aggregation;
-use eval::{evaluate, AoiRule, EvalOptions, Method};
-use workflow::matcher::Matcher;
-use workflow::Progress;
+use seasonstereo::benchmark::{AoiRule, Method, Protocol, Split};
+use seasonstereo::defaults::OMAHA_MAX_DISPARITY;
+use seasonstereo::{eval, Aggregation, EvalOptions, Matcher, Progress};
 
 use crate::args::{NetworkArgs, SgmArgs};
 
@@ -55,9 +54,9 @@ pub struct EvalArgs {
     /// Table 1's names: Jacksonville, "Buenos Aires", "Omaha Synch.", "Omaha Diach." (aliases
     /// jax, ba, omaha-sync, omaha-dia); other names get columns of their own. Omaha splits drop
     /// pairs whose true disparity exceeds the limit.
-    #[arg(long = "split", value_name = "NAME=DIR", value_parser = eval::Split::parse,
+    #[arg(long = "split", value_name = "NAME=DIR", value_parser = Split::parse,
           required_unless_present = "world", help_heading = SPLITS)]
-    splits: Vec<eval::Split>,
+    splits: Vec<Split>,
     /// Evaluate a folder written by `seasonstereo world` instead.
     ///
     /// Split "World", with DIR/rpc and DIR/truth.
@@ -108,7 +107,7 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 1024, help_heading = PROTOCOL, hide_short_help = true)]
     crop: usize,
     /// Omaha pairs whose ground-truth disparity exceeds this are dropped, pixels.
-    #[arg(long, default_value_t = eval::aggregate::OMAHA_MAX_DISPARITY,
+    #[arg(long, default_value_t = OMAHA_MAX_DISPARITY,
           help_heading = PROTOCOL, hide_short_help = true)]
     omaha_max_disparity: f64,
     /// Scoring rules: `release` (the benchmark's evaluator exactly) or `robust`.
@@ -118,9 +117,9 @@ pub struct EvalArgs {
     /// one registration on the whole truth, NaN for the truth's nodata, a centre-preferring NCC
     /// with a minimum overlap (rows named "<method> [robust]").
     #[arg(long, value_name = "release|robust", default_value = "release",
-          value_parser = eval::Protocol::parse,
+          value_parser = Protocol::parse,
           help_heading = PROTOCOL, hide_short_help = true)]
-    protocol: eval::Protocol,
+    protocol: Protocol,
     #[command(flatten)]
     sgm: SgmArgs,
     #[command(flatten)]
@@ -140,7 +139,7 @@ impl EvalMethod {
 
 pub fn run(a: EvalArgs, progress: &dyn Progress) -> Result<()> {
     let opts = a.options()?;
-    let r = evaluate(&opts, progress)?;
+    let r = eval(&opts, progress)?;
     println!("{}", r.table.to_text());
     println!(
         "{} pairs scored, {} already scored (skipped), {} dropped (Omaha disparity > {}); per pair: {}; table: {}",
@@ -149,17 +148,14 @@ pub fn run(a: EvalArgs, progress: &dyn Progress) -> Result<()> {
     for (pair, cause) in &r.failed {
         eprintln!("warning: pair {pair} failed: {cause}");
     }
-    if r.failed.is_empty() {
-        return Ok(());
-    }
     let total = r.scored + r.skipped + r.dropped + r.failed.len();
     let names = r.failed.iter().map(|(p, _)| p.clone()).collect();
-    Err(crate::exit::partial(
+    crate::exit::partial_if_any(
         "pairs",
         total,
         names,
         "fix them and rerun: scored pairs are skipped",
-    ))
+    )
 }
 
 impl EvalArgs {
@@ -196,7 +192,7 @@ impl EvalArgs {
         };
         match self.name {
             Some(n) => opts.method_name = n,
-            None if self.protocol != eval::Protocol::Release => {
+            None if self.protocol != Protocol::Release => {
                 opts.method_name = format!("{} [{}]", opts.method_name, self.protocol.name());
             }
             None => {}

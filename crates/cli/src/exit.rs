@@ -8,7 +8,8 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::sync::OnceLock;
 
-use workflow::outputs::{check_output_file, Incomplete};
+use seasonstereo::outputs::{check_output_file, first_names};
+use seasonstereo::{error_line, Incomplete};
 
 /// The text of `--help` on exit codes.
 pub const EXIT_CODES_HELP: &str = "Exit codes: 0 all done; 1 error before any work (a missing \
@@ -69,7 +70,7 @@ pub fn exit_code(result: anyhow::Result<()>) -> ExitCode {
 
 /// The error chain as one line, a context already contained in its cause left out.
 pub fn message(e: &anyhow::Error) -> String {
-    workflow::outputs::one_line(e)
+    error_line(e)
 }
 
 /// Clap's errors: help and version exit 0, a malformed command line 1 (2 means partial).
@@ -82,15 +83,24 @@ pub fn parse_error(e: clap::Error) -> ExitCode {
     }
 }
 
-/// The error of a run that wrote its output but whose `failed` items are missing from it.
-pub fn partial(what: &str, total: usize, failed: Vec<String>, retry: &str) -> anyhow::Error {
-    Incomplete::Partial {
+/// The end of a run that wrote its output: exit code 2 when its `failed` items (of `total`
+/// `what`) are missing from it, the first ones named and how to `retry`; `Ok` when none failed.
+pub fn partial_if_any(
+    what: &str,
+    total: usize,
+    failed: Vec<String>,
+    retry: &str,
+) -> anyhow::Result<()> {
+    if failed.is_empty() {
+        return Ok(());
+    }
+    Err(Incomplete::Partial {
         message: format!(
             "{} of {total} {what} failed ({}); the output holds the others: {retry}",
             failed.len(),
-            workflow::outputs::first_names(&failed)
+            first_names(&failed)
         ),
         failed,
     }
-    .into()
+    .into())
 }

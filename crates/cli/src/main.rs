@@ -1,6 +1,7 @@
 //! `seasonstereo`: dense stereo matching of multi-date satellite imagery.
 //!
-//! This binary only parses arguments and draws progress; the work lives in the library crates.
+//! This binary only parses arguments and draws progress; the work lives in the library, which
+//! it reaches through its API alone (the `seasonstereo` crate).
 
 /// Tensors of the networks come and go by the megabyte: mimalloc reuses their pages where the
 /// system allocator returns them to the kernel and faults them in again (BENCHMARKS.md).

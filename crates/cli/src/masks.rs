@@ -5,11 +5,12 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use stages::masks::heights::PairIndex;
-use stages::masks::{
-    self, MasksOptions, MasksRecord, OfflineSegmenter, RulesSegmenter, SegformerSegmenter,
+use seasonstereo::defaults::SEGFORMER_PRESET;
+use seasonstereo::stages::{
+    masks, masks_score, masks_table, ImageSegmenter, MasksOptions, MasksRecord, OfflineSegmenter,
+    PairIndex, RulesSegmenter, SegformerSegmenter,
 };
-use workflow::Progress;
+use seasonstereo::Progress;
 
 use crate::args::{report, DeviceArg, ShardArg};
 
@@ -50,12 +51,7 @@ pub struct MasksArgs {
     #[arg(long, value_name = "FILE")]
     segformer: Option<PathBuf>,
     /// SegFormer layout: mit-b2 (the release) or tiny (the parity fixture).
-    #[arg(
-        long,
-        value_name = "PRESET",
-        default_value = "mit-b2",
-        requires = "segformer"
-    )]
+    #[arg(long, value_name = "PRESET", default_value = SEGFORMER_PRESET, requires = "segformer")]
     segformer_config: String,
     /// The offline segmenter (without --segformer): rules (colour + heights, for real imagery)
     /// or pixel-classifier (trained on procedural worlds).
@@ -88,7 +84,7 @@ pub enum OfflineKind {
 }
 
 pub fn run(a: MasksArgs, progress: &dyn Progress) -> Result<()> {
-    let segmenter: Box<dyn masks::ImageSegmenter> = match &a.segformer {
+    let segmenter: Box<dyn ImageSegmenter> = match &a.segformer {
         Some(w) => Box::new(SegformerSegmenter::load(
             w,
             &a.segformer_config,
@@ -122,7 +118,7 @@ pub fn run(a: MasksArgs, progress: &dyn Progress) -> Result<()> {
         segmenter,
     };
     println!("segmenter: {}", opts.segmenter.name());
-    let s = masks::run_masks(&opts, progress)?;
+    let s = masks(&opts, progress)?;
     report("masks", &s);
     println!("masks in {}", opts.out_dir.display());
     Ok(())
@@ -163,7 +159,7 @@ pub struct MasksScoreArgs {
 }
 
 pub fn run_score(a: MasksScoreArgs) -> Result<()> {
-    let folder = masks::score::score_folder(
+    let folder = masks_score(
         &a.masks,
         &a.rpc_dir,
         &a.truth,
@@ -189,6 +185,6 @@ pub fn run_score(a: MasksScoreArgs) -> Result<()> {
     if let Some(record) = MasksRecord::read(&a.masks)? {
         println!("segmenter: {}", record.segmenter);
     }
-    print!("{}", masks::score::table(&scores));
+    print!("{}", masks_table(&scores));
     Ok(())
 }

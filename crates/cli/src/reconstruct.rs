@@ -4,16 +4,15 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use dataset::Shard;
+use seasonstereo::{defaults, flags};
 use seasonstereo::{
-    reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, TileStatus,
+    reconstruct, DsmSummary, Progress, ReconstructOptions, ReconstructSummary, Roi, Shard,
+    TileStatus,
 };
 
-use reconstruct::flags;
-
 use crate::args::{
-    heading, parse_alt_range, parse_box, parse_roi, GridArgs, GriddingArg, MatcherArgs,
-    ProductArgs, ShardArg, TilingArgs,
+    heading, parse_alt_range, parse_box, parse_roi, print_products_and_scores, GridArgs,
+    GriddingArg, MatcherArgs, ProductArgs, ShardArg, TilingArgs,
 };
 
 /// `reconstruct -h`'s epilogue: the principal use, as it pastes.
@@ -114,7 +113,7 @@ pub struct ReconstructArgs {
     /// Region of the left image X,Y,W,H, pixels (default: the whole image).
     #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi, conflicts_with = "roi_lonlat",
           help_heading = heading::REGION)]
-    roi: Option<camera::rectify::Roi>,
+    roi: Option<Roi>,
     /// Region as lon/lat bounds, degrees.
     ///
     /// The left image's pixels that see it at any altitude of the scene.
@@ -188,7 +187,7 @@ pub struct ReconstructArgs {
     /// A cell is filled when data lie on both sides of it along a row, column or diagonal
     /// within this distance, ground first (the ground hidden behind buildings, unmatched
     /// patches); 0 leaves every hole empty, as the benchmark's protocol does.
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_CELLS,
+    #[arg(long, value_name = "CELLS", default_value_t = defaults::FILL_CELLS,
           help_heading = heading::FINISHING, hide_short_help = true)]
     fill_holes: usize,
     /// Fill only the cells within this many cells of a measured height.
@@ -196,14 +195,14 @@ pub struct ReconstructArgs {
     /// Along the filling's rays: the middle of a wider hole stays empty, because a height
     /// invented that far from any measurement is a guess (a courtyard at its roofs' height, a
     /// low roof at the ground's). The `_filled.tif` sidecar marks the filled cells either way.
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_FILL_REACH,
+    #[arg(long, value_name = "CELLS", default_value_t = defaults::FILL_REACH,
           help_heading = heading::FINISHING, hide_short_help = true)]
     fill_reach: usize,
     /// Median filter of the DSM over this odd window of cells; 0 or 1 disables it.
     ///
     /// After the filling: removes the roughness of single-pair matching on roofs and ground and
     /// keeps building edges (15 cells = 7.5 m at 0.5 m).
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::DEFAULT_MEDIAN_CELLS,
+    #[arg(long, value_name = "CELLS", default_value_t = defaults::MEDIAN_CELLS,
           help_heading = heading::FINISHING, hide_short_help = true)]
     median_filter: usize,
     #[command(flatten)]
@@ -239,12 +238,7 @@ pub fn run(a: ReconstructArgs, progress: &dyn Progress) -> Result<()> {
         return Ok(());
     };
     println!("{}", dsm_line(&s, dsm, &output));
-    if let Some(written) = &s.products {
-        println!("{}", crate::args::products_line(&options.products, written));
-    }
-    if let Some(sc) = &s.scores {
-        println!("vs truth: {}", crate::score::format_scores(sc));
-    }
+    print_products_and_scores(&options.products, s.products.as_ref(), s.scores.as_ref());
     failed_tiles(&s, Shard::ALL)
 }
 
@@ -256,15 +250,12 @@ fn failed_tiles(s: &ReconstructSummary, shard: Shard) -> Result<()> {
         .filter(|r| r.status == TileStatus::Failed && shard.contains(r.tile.index))
         .map(|r| r.tile.id.clone())
         .collect();
-    if failed.is_empty() {
-        return Ok(());
-    }
-    Err(crate::exit::partial(
+    crate::exit::partial_if_any(
         "tiles",
         s.records.len(),
         failed,
         "rerun the same command to retry them",
-    ))
+    )
 }
 
 impl ReconstructArgs {
@@ -283,10 +274,12 @@ impl ReconstructArgs {
             output: self.output,
             work_dir: self.work,
             grid: self.grid.choice(),
-            gridding: self.gridding.into(),
-            fill_holes: flags::fill_cells(self.fill_holes),
-            fill_reach: self.fill_reach,
-            median_filter: flags::median_cells(self.median_filter),
+            finishing: seasonstereo::Finishing::new(
+                self.gridding.into(),
+                flags::fill_cells(self.fill_holes),
+                Some(self.fill_reach),
+                flags::median_cells(self.median_filter),
+            ),
             border: 0,
             truth: self.truth,
             tile: self.tiling.tile,

@@ -5,13 +5,15 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
+use seasonstereo::{defaults, flags};
 use seasonstereo::{
     reconstruct_many, FusionParams, PairChoice, Progress, ReconstructManyOptions,
     ReconstructManySummary, View,
 };
 
 use crate::args::{
-    heading, parse_alt_range, GridArgs, GriddingArg, MatcherArgs, ProductArgs, TilingArgs,
+    heading, parse_alt_range, print_products_and_scores, GridArgs, GriddingArg, MatcherArgs,
+    ProductArgs, TilingArgs,
 };
 
 /// `reconstruct-many -h`'s epilogue: the principal use, as it pastes.
@@ -108,7 +110,7 @@ pub struct ReconstructManyArgs {
     #[command(flatten)]
     grid: GridArgs,
     /// How many pairs to reconstruct and fuse: the best by score.
-    #[arg(long, value_name = "K", default_value_t = seasonstereo::DEFAULT_PAIRS,
+    #[arg(long, value_name = "K", default_value_t = defaults::PAIRS,
           help_heading = heading::QUALITY)]
     pairs: usize,
     /// Print the chosen pairs and their score terms; reconstruct nothing.
@@ -199,7 +201,7 @@ pub struct ReconstructManyArgs {
           help_heading = heading::FINISHING, hide_short_help = true)]
     fill_holes: usize,
     /// Median filter of the fused DSM over this odd window of cells; 0 or 1 disables it.
-    #[arg(long, value_name = "CELLS", default_value_t = reconstruct::dsm::FUSED_MEDIAN_CELLS,
+    #[arg(long, value_name = "CELLS", default_value_t = defaults::FUSED_MEDIAN_CELLS,
           help_heading = heading::FINISHING, hide_short_help = true)]
     median_filter: usize,
     /// Median filter of each pair's DSM before fusion (never fills a cell); 0 or 1 disables it.
@@ -210,7 +212,7 @@ pub struct ReconstructManyArgs {
     products: ProductArgs,
 }
 
-/// Runs the command: an error of [`workflow::outputs::Incomplete`] when some pairs failed (exit 2) or none produced
+/// Runs the command: an error of [`seasonstereo::Incomplete`] when some pairs failed (exit 2) or none produced
 /// a DSM (exit 3).
 pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
     // Pairs of different sizes run one after the other: freed pages go back to the kernel after
@@ -241,12 +243,7 @@ pub fn run(a: ReconstructManyArgs, progress: &dyn Progress) -> Result<()> {
         return partial_if_incomplete(&s);
     };
     println!("{}", fused_line(&s, f));
-    if let Some(written) = &s.products {
-        println!("{}", crate::args::products_line(&options.products, written));
-    }
-    if let Some(sc) = &s.scores {
-        println!("vs truth: {}", crate::score::format_scores(sc));
-    }
+    print_products_and_scores(&options.products, s.products.as_ref(), s.scores.as_ref());
     if let Some(r) = &s.report {
         println!("report: {}", r.display());
     }
@@ -260,15 +257,12 @@ fn partial_if_incomplete(s: &ReconstructManySummary) -> Result<()> {
         .iter()
         .map(|p| p.stem.clone())
         .collect();
-    if incomplete.is_empty() {
-        return Ok(());
-    }
-    Err(crate::exit::partial(
+    crate::exit::partial_if_any(
         "pairs",
         s.pairs.len(),
         incomplete,
         "rerun the same command after fixing them (finished pairs and tiles are kept)",
-    ))
+    )
 }
 
 impl ReconstructManyArgs {
@@ -290,15 +284,18 @@ impl ReconstructManyArgs {
         o.min_confidence = self.min_confidence;
         o.co_register = self.register;
         o.weight_pairs = self.pair_weights;
-        o.fill_holes = reconstruct::flags::fill_cells(self.fill_holes);
-        o.median_filter = reconstruct::flags::median_cells(self.median_filter);
-        o.pair_median_filter = reconstruct::flags::median_cells(self.pair_median_filter);
+        o.finishing = seasonstereo::Finishing::new(
+            self.gridding.into(),
+            flags::fill_cells(self.fill_holes),
+            None,
+            flags::median_cells(self.median_filter),
+        );
+        o.pair_median_filter = flags::median_cells(self.pair_median_filter);
         o.both_views = !self.single_view;
         o.truth = self.truth;
         o.alt_range = self.alt_range;
         o.adjust_pointing = !self.no_pointing_correction;
         o.products = self.products.products();
-        o.gridding = self.gridding.into();
         (o.tile, o.collar) = (self.tiling.tile, self.tiling.collar);
         o.max_memory = self.tiling.max_memory_bytes()?;
         o.shard = self.shard.shard;

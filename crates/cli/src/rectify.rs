@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use workflow::Progress;
+use seasonstereo::{rectify, Progress, RectifyOptions, Roi};
 
 use crate::args::{parse_alt_range, parse_roi};
 
@@ -27,7 +27,7 @@ pub struct RectifyArgs {
     output: PathBuf,
     /// Region of interest X,Y,W,H in the left raw image, pixels. Default: the whole image.
     #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi)]
-    roi: Option<camera::rectify::Roi>,
+    roi: Option<Roi>,
     /// Left camera, instead of the image's RPC tag: SatNeRF/rpcm JSON (`.json`), or another
     /// GeoTIFF carrying the RPC tag 50844.
     #[arg(long, value_name = "CAMERA")]
@@ -47,7 +47,7 @@ pub struct RectifyArgs {
 }
 
 pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
-    let opts = reconstruct::rectify::RectifyOptions {
+    let opts = RectifyOptions {
         left: a.left,
         right: a.right,
         out_dir: a.output,
@@ -58,7 +58,7 @@ pub fn run(a: RectifyArgs, progress: &dyn Progress) -> Result<()> {
         stem: a.stem,
     };
     opts.check_output()?;
-    let s = reconstruct::rectify::rectify(&opts, progress)?;
+    let s = rectify(&opts, progress)?;
     let (lo, hi) = s.disparity_range;
     println!(
         "wrote pair {} ({}x{} px) to {}: disparity range {lo}:{hi} px for altitudes {}:{} m ({}, {:.3} px/m), rows aligned to {:.3} px",

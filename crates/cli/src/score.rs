@@ -4,7 +4,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
-use seasonstereo::{read_truth, score, score_against, CellsMae, DsmScores, Truth, Versus};
+use seasonstereo::outputs::write_text;
+use seasonstereo::{
+    flags, read_truth, score, score_against, truth_zone, CellsMae, DsmGrid, DsmScores, Truth,
+    UtmZone, Versus,
+};
 
 /// A share as a percentage, `-` when undefined.
 fn percent(v: Option<f64>) -> String {
@@ -73,8 +77,8 @@ pub struct ScoreArgs {
     truth: PathBuf,
     /// UTM zone of a DFC2019 truth's .txt georeference, e.g. 17N (Jacksonville), 15N (Omaha),
     /// 21S (Buenos Aires). Default: the zone of the first DSM scored (its GeoTIFF EPSG code).
-    #[arg(long, value_name = "ZONE", value_parser = reconstruct::flags::utm_zone)]
-    utm_zone: Option<camera::UtmZone>,
+    #[arg(long, value_name = "ZONE", value_parser = flags::utm_zone)]
+    utm_zone: Option<UtmZone>,
     /// Compare each DSM with this one (another method's DSM, cut onto the truth's grid) on the cells
     /// both cover and on those only one covers.
     #[arg(long, value_name = "DSM")]
@@ -96,7 +100,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             .collect();
         crate::exit::guard_output("--json", j, &inputs)?;
     }
-    let zone = eval::score::truth_zone(&a.dsm[0], a.utm_zone)?;
+    let zone = truth_zone(&a.dsm[0], a.utm_zone)?;
     let truth = read_truth(&a.truth, zone)?;
     let mut lines = String::new();
     for path in &a.dsm {
@@ -109,7 +113,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         lines.push('\n');
     }
     if let Some(j) = &a.json {
-        workflow::stage::write_text(j, &lines)?;
+        write_text(j, &lines)?;
     }
     Ok(())
 }
@@ -118,7 +122,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
 /// takes its scores for those of a DSM made on that grid. (A DSM that cannot be read is
 /// reported by the scoring itself.)
 fn note_cut(path: &Path, truth: &Truth) {
-    let Ok(grid) = camera::DsmGrid::read(path, truth.grid.zone()) else {
+    let Ok(grid) = DsmGrid::read(path, truth.grid.zone()) else {
         return;
     };
     if grid != truth.grid {

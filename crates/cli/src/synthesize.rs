@@ -4,11 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use stages::synthesize::{run_synthesize, SynthesizeOptions, DEFAULT_CROP};
-use workflow::Progress;
-use synth::api::{GeminiConfig, GeminiGenerator};
-use synth::prompts::Prompts;
-use synth::{BuiltinSeasons, Season, SeasonGenerator};
+use seasonstereo::defaults::{GEMINI_API_KEY_ENV, GEMINI_BASE_URL, GEMINI_MODEL, SYNTHESIZE_CROP};
+use seasonstereo::stages::{
+    synthesize, BuiltinSeasons, GeminiConfig, GeminiGenerator, Prompts, Season, SeasonGenerator,
+    SynthesizeOptions,
+};
+use seasonstereo::Progress;
 
 use crate::args::ShardArg;
 
@@ -74,7 +75,7 @@ pub struct SynthesizeArgs {
     #[arg(long, value_name = "DIR")]
     classes: Option<PathBuf>,
     /// Centre crop side, pixels (smaller images are kept whole).
-    #[arg(long, default_value_t = DEFAULT_CROP)]
+    #[arg(long, default_value_t = SYNTHESIZE_CROP)]
     crop: usize,
     /// Seasons to generate (repeat or comma-separate).
     #[arg(long, value_delimiter = ',', value_parser = parse_season,
@@ -87,18 +88,18 @@ pub struct SynthesizeArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// API model (gemini).
-    #[arg(long, default_value = synth::api::DEFAULT_MODEL,
+    #[arg(long, default_value = GEMINI_MODEL,
           help_heading = API, hide_short_help = true)]
     model: String,
     /// Seasonal prompts, TOML (gemini; default: the built-in prompts).
     #[arg(long, value_name = "FILE", help_heading = API, hide_short_help = true)]
     prompts: Option<PathBuf>,
     /// Environment variable holding the API key (gemini; the key is never logged).
-    #[arg(long, default_value = synth::api::DEFAULT_API_KEY_ENV,
+    #[arg(long, default_value = GEMINI_API_KEY_ENV,
           help_heading = API, hide_short_help = true)]
     api_key_env: String,
     /// API endpoint (gemini).
-    #[arg(long, default_value = synth::api::DEFAULT_BASE_URL,
+    #[arg(long, default_value = GEMINI_BASE_URL,
           help_heading = API, hide_short_help = true)]
     api_url: String,
     /// Requests in flight at once (gemini).
@@ -123,7 +124,7 @@ pub struct SynthesizeArgs {
 pub fn run(a: SynthesizeArgs, progress: &dyn Progress) -> Result<()> {
     let generator = a.generator()?;
     eprintln!("generator: {}", generator.name());
-    let s = run_synthesize(&a.options(), generator.as_ref(), progress)?;
+    let s = synthesize(&a.options(), generator.as_ref(), progress)?;
     let i = &s.images;
     println!(
         "images: {} processed, {} already done (skipped), {} in this shard of {}; variants: {} accepted, {} rejected by the fidelity check (see {})",

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use stages::teacher::{self, TeacherOptions};
-use workflow::Progress;
+use seasonstereo::stages::{teacher, TeacherOptions};
+use seasonstereo::Progress;
 
 use crate::args::{parse_range, report, MatcherArgs, ShardArg};
 
@@ -46,7 +46,7 @@ pub fn run(a: TeacherArgs, progress: &dyn Progress) -> Result<()> {
         range: a.range,
         shard: a.shard.shard,
     };
-    let s = teacher::run_teacher(&opts, progress)?;
+    let s = teacher(&opts, progress)?;
     report(&format!("teacher {}", opts.matcher.name()), &s);
     println!("disparities in {}", opts.out_dir.display());
     Ok(())

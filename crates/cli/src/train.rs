@@ -1,12 +1,15 @@
 //! `seasonstereo train`: fine-tune MonSter++ with the SeasonStereo loss (the work is in the
-//! `train` crate; this file parses arguments and draws the progress bar).
+//! library's `seasonstereo::train`; this file parses arguments and draws the progress bar).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use train::{Observer, StepRecord, TrainConfig, TrainOptions, ValidationRecord};
+use seasonstereo::train::{
+    interrupt_flag, resume_config, train, Observer, StepRecord, TrainConfig, TrainOptions,
+    TrainSummary, ValidationRecord, PRESETS,
+};
 
 #[derive(Args)]
 pub struct TrainArgs {
@@ -62,12 +65,12 @@ pub fn run(a: TrainArgs) -> Result<()> {
     }
     let options = TrainOptions {
         resume: a.resume.clone(),
-        stop: Some(train::trainer::interrupt_flag()?),
+        stop: Some(interrupt_flag()?),
         stop_after: a.stop_after,
         device: Some(a.device.device.device().map_err(anyhow::Error::msg)?),
     };
     let mut bar = TrainBar::default();
-    let summary = train::train(&config, &options, &mut bar)
+    let summary = train(&config, &options, &mut bar)
         .with_context(|| format!("training run {:?}", config.name))?;
     bar.finish();
     print_summary(&summary);
@@ -102,18 +105,18 @@ impl TrainArgs {
     fn config(&self) -> Result<TrainConfig> {
         let overrides = self.overrides();
         match (&self.resume, &self.config) {
-            (Some(r), None) => Ok(train::trainer::resume_config(r, &overrides)?),
+            (Some(r), None) => Ok(resume_config(r, &overrides)?),
             (_, Some(c)) => Ok(TrainConfig::load(c, &overrides)?),
             (None, None) => anyhow::bail!(
                 "give --config PRESET|FILE (presets: {}) or --resume RUN_DIR",
-                train::config::PRESETS.join(", ")
+                PRESETS.join(", ")
             ),
         }
     }
 }
 
 /// The closing lines: steps and loss, validation, checkpoint.
-fn print_summary(summary: &train::trainer::TrainSummary) {
+fn print_summary(summary: &TrainSummary) {
     let loss = |v: Option<f32>| v.map_or("-".into(), |v| format!("{v:.4}"));
     let done = if summary.interrupted {
         "stopped after"

@@ -4,8 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use workflow::progress::track;
-use workflow::Progress;
+use seasonstereo::world::{
+    generate, save_raw_views, save_world, write_dated_stack, Neutral, WorldParams, ACQUISITIONS,
+};
+use seasonstereo::{track, Progress};
 
 #[derive(Args)]
 pub struct WorldArgs {
@@ -49,15 +51,15 @@ pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
     if a.dates {
         return run_dates(a, progress);
     }
-    let params = world::WorldParams::new(a.size, a.seed);
+    let params = WorldParams::new(a.size, a.seed);
     let world = track(progress, "rendering the world", a.size, |cb| {
-        world::generate(&params, &world::Neutral, cb)
+        generate(&params, &Neutral, cb)
     })
     .map_err(anyhow::Error::msg)?;
     let name = a.name.unwrap_or_else(|| format!("WORLD_{}", a.seed));
-    let paths = eval::world_io::save_world(&world, &a.output, &name)?;
+    let paths = save_world(&world, &a.output, &name)?;
     if a.raw {
-        let (l, r) = eval::world_io::save_raw_views(&world, &a.output, &name)?;
+        let (l, r) = save_raw_views(&world, &a.output, &name)?;
         println!("raw views: {} {}", l.display(), r.display());
     }
     let (lo, hi) = world.disparity_range();
@@ -74,7 +76,6 @@ pub fn run(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
 
 /// `--dates`: the multi-date stack.
 fn run_dates(a: WorldArgs, progress: &dyn Progress) -> Result<()> {
-    use eval::world_dates::{write_dated_stack, ACQUISITIONS};
     let name = a.name.unwrap_or_else(|| format!("WORLD_{}", a.seed));
     let stack = write_dated_stack(a.size, a.seed, &name, &ACQUISITIONS, &a.output, progress)?;
     for (path, acq) in stack.images.iter().zip(&ACQUISITIONS) {

@@ -26,12 +26,12 @@ use dataset::subset::Subset;
 
 use super::laps::Laps;
 use eval::{evaluate, EvalOptions, EvalReport, Method, Table};
-use workflow::matcher::{Matcher, MonsterOptions, Network};
-use workflow::progress::Progress;
+use nn::device::DeviceChoice;
 use stages::world_training::{
     build_world_training, WorldMasks, WorldTrainingOptions, WorldTrainingSummary,
 };
-use nn::device::DeviceChoice;
+use workflow::matcher::{Matcher, MonsterOptions, Network};
+use workflow::progress::Progress;
 
 pub use heldout::{HeldOut, CROSS_SEASON, HELDOUT_SEED_OFFSET, SYNCHRONIC};
 pub use runs::{subset_name, RunPlan, RunResult};

@@ -15,8 +15,8 @@ use eval::layout::{AoiRule, TruthFiles};
 use eval::metrics::{class_code, score_dsm, DsmScores};
 use eval::protocol::Protocol;
 use eval::{predicted_dsm, Truth};
-use workflow::pairs::PairPaths;
 use products::dsm_picture;
+use workflow::pairs::PairPaths;
 
 /// DFC2019 classes of the truth DSM's `_CLS.tif` (as [`eval::world_io::dfc_class`] writes them).
 pub const DFC_CLASSES: [(u8, &str); 4] =

@@ -25,13 +25,13 @@ use raster::{colormap, Image};
 use synth::{BuiltinSeasons, Season, SeasonGenerator, SourceImage};
 use world::{World, WorldParams};
 
-use workflow::matcher::{Matcher, RangeSource};
-use workflow::progress::{track, Progress};
-use eval::world_io::{image_ids, mask_picture, save_world};
 use disparities::{score_disparities, DisparityResult};
 use dsms::{read_world_truth, score_dsms, triangulate_dsms};
+use eval::world_io::{image_ids, mask_picture, save_world};
 use laps::Laps;
 use report::{write_report, ReportContext};
+use workflow::matcher::{Matcher, RangeSource};
+use workflow::progress::{track, Progress};
 
 pub use figures::thumbnail;
 pub use format::{matcher_flags, metres, percent, pixels};

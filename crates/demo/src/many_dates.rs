@@ -6,13 +6,13 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use reconstruct::dsm::GridChoice;
 use eval::metrics::DsmScores;
-use workflow::matcher::Matcher;
-use workflow::progress::Progress;
+use eval::world_dates::{write_dated_stack, ACQUISITIONS};
+use reconstruct::dsm::GridChoice;
 use reconstruct::many::{reconstruct_many, ReconstructManyOptions};
 use reconstruct::{reconstruct, ReconstructOptions};
-use eval::world_dates::{write_dated_stack, ACQUISITIONS};
+use workflow::matcher::Matcher;
+use workflow::progress::Progress;
 
 use super::options::DemoOptions;
 

@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use matching::SgmParams;
 #[cfg(feature = "network")]
 use demo::ablation::{run_ablation, AblationOptions, CROSS_SEASON, SYNCHRONIC};
 use demo::{run_demo, DemoOptions, DemoSummary};
+use matching::SgmParams;
 use workflow::Silent;
 
 fn run(dir: &Path, size: usize) -> DemoSummary {

@@ -58,9 +58,9 @@ pub mod layout;
 pub mod metrics;
 pub mod protocol;
 pub mod records;
+pub mod score;
 pub mod table;
 pub mod versus;
-pub mod score;
 pub mod world_dates;
 pub mod world_io;
 
@@ -72,8 +72,6 @@ use raster::formats::{read_homographies, read_tiff};
 use raster::geometry::{crop, crop_homography};
 use raster::{Homography, Image};
 
-use workflow::matcher::{Matcher, RangeSource};
-use workflow::progress::{Progress, Silent};
 pub use aggregate::{aggregate, Table};
 pub use align::{align, AlignParams, Alignment, Scheme};
 pub use layout::{AoiRule, PairFiles, Split, TruthFiles};
@@ -81,6 +79,8 @@ pub use metrics::{score_dsm, DsmScores, Exclusions, Registration, Score, ScorePa
 pub use protocol::Protocol;
 pub use records::{PairRecord, RecordFile};
 pub use versus::{score_versus, CellsMae, Versus};
+use workflow::matcher::{Matcher, RangeSource};
+use workflow::progress::{Progress, Silent};
 
 /// Name of the per-pair CSV in the output folder.
 pub const PAIRS_CSV: &str = "pairs.csv";

@@ -22,9 +22,9 @@ use synth::{BuiltinSeasons, Season, SeasonGenerator, SourceImage};
 use world::{ViewCamera, WorldParams};
 
 use crate::layout::TruthFiles;
+use crate::world_io::{image_ids, write_raw_view, write_world_truth};
 use workflow::progress::{track, Progress};
 use workflow::stage::write_json;
-use crate::world_io::{image_ids, write_raw_view, write_world_truth};
 
 /// One acquisition of the stack.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -10,8 +10,8 @@ use eval::{
     aggregate, align, evaluate, score_dsm, AlignParams, EvalOptions, Exclusions, Method,
     PairRecord, Protocol, ScoreParams,
 };
-use workflow::Silent;
 use raster::{Image, Mask};
+use workflow::Silent;
 
 /// A DSM with relief at several scales (so NCC has a clear peak) and some NaN holes.
 fn synthetic_dsm(w: usize, h: usize) -> Image {

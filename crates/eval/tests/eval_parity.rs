@@ -61,8 +61,8 @@ use std::path::{Path, PathBuf};
 use eval::aggregate::{aggregate, exceeds_disparity_limit};
 use eval::records::{PairRecord, STATUS_DROPPED, STATUS_SCORED};
 use eval::{evaluate, EvalOptions, Method, Protocol, Split};
-use workflow::Silent;
 use raster::Image;
+use workflow::Silent;
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/eval_parity");
 

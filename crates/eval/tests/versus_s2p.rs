@@ -4,8 +4,8 @@
 //! own grid, which `score` cuts onto the truth's.
 
 use camera::UtmZone;
-use eval::Truth;
 use eval::score::{read_on_truth_grid, read_truth, score_dsm_file, score_versus_files};
+use eval::Truth;
 
 use testdata::jax;
 

@@ -130,7 +130,7 @@ fn node_cpus() -> Result<usize> {
     let out = Command::new("sinfo")
         .args(["--noheader", "--format=%c"])
         .output()
-        .context("running sinfo (is this a Slurm login node? else give --cpus-per-task)")?;
+        .context("running sinfo (is this a Slurm login node?)")?;
     let text = String::from_utf8_lossy(&out.stdout);
     let cpus = text
         .lines()

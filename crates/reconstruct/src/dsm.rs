@@ -6,11 +6,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use camera::{
-    rasterize, triangulate_disparity, write_dsm, Crs, DsmGrid, DsmRaster, Gridding, HoleFill,
-    Points, RpcModel, UtmZone,
+    rasterize, triangulate_disparity, write_dsm, Crs, DsmGrid, DsmRaster, Points, RpcModel, UtmZone,
 };
 use raster::{Image, Mask};
 
+use crate::finishing::Finishing;
 use eval::aggregate::median;
 use eval::align::{align, apply, AlignParams};
 use workflow::outputs::{check_dsm_extension, check_output_file};
@@ -47,14 +47,9 @@ pub struct DsmOptions {
     pub grid: GridChoice,
     /// Pixels trimmed on every side before triangulating (the benchmark trims 32).
     pub border: usize,
-    /// Highest point per cell (the benchmark's protocol) or the median.
-    pub gridding: Gridding,
-    /// Fill the holes enclosed by data within this many cells ([`camera::fill_holes`]);
-    /// `None`: leave them empty (the benchmark's protocol).
-    pub fill_holes: Option<usize>,
-    /// NaN-aware median filter over this odd window, after the filling
-    /// ([`camera::median_filter`]); `None`: none.
-    pub median_filter: Option<usize>,
+    /// Gridding (highest point per cell: the benchmark's protocol; or the median), hole
+    /// filling and median filter.
+    pub finishing: Finishing,
     /// Output GeoTIFF.
     pub output: PathBuf,
     /// A reference DSM to compare with after alignment.
@@ -177,10 +172,9 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
             epsg,
         } => grid_for(&points, *resolution, *bounds, *epsg)?,
     };
-    let dsm = rasterize(&points, &grid, opts.gridding);
+    let dsm = rasterize(&points, &grid, opts.finishing.gridding);
     let measured_cells = dsm.data().iter().filter(|v| v.is_finite()).count();
-    let fill = opts.fill_holes.map(HoleFill::spanning);
-    let dsm = finish_dsm(dsm, fill, opts.median_filter)?;
+    let dsm = opts.finishing.finish(dsm)?;
     remove_other_sidecars(&opts.output, &[])?;
     write_dsm(&opts.output, &dsm, &grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
@@ -197,24 +191,6 @@ pub fn disparity_to_dsm(opts: &DsmOptions) -> Result<DsmSummary> {
     })
 }
 
-/// `reconstruct`'s hole filling distance, cells; the masks' heights fill their DSMs alike.
-pub const DEFAULT_FILL_CELLS: usize = 40;
-/// How far from a measured cell `reconstruct` invents heights, cells (8 m at 0.5 m): on the 45
-/// dev pairs the cells beyond were mostly far off, and leaving them empty lowered the MAE in
-/// nearly every bin of date gap and baseline at no loss of cells within 1 m (BENCHMARKS.md, "The
-/// filling stops 16 cells from the data").
-pub const DEFAULT_FILL_REACH: usize = 16;
-/// `reconstruct`'s median window after filling, cells (odd; 7.5 m at 0.5 m): one pair's DSM
-/// carries matching noise of a pixel of disparity and more, and on the 45 dev pairs a 15-cell
-/// window beat 7 and 11 in every bin of date gap and baseline (BENCHMARKS.md, "The DSM's median
-/// window: 15 cells, not 7").
-pub const DEFAULT_MEDIAN_CELLS: usize = 15;
-/// The median window of DSMs made from several pairs at once (`reconstruct-many`'s fused DSM,
-/// the masks' heights), cells: the pairs already average the matching noise, and a wider window
-/// only erodes structures (the fused dev DSM is worse with 15 cells than with 7: BENCHMARKS.md,
-/// "The DSM's median window: 15 cells, not 7").
-pub const FUSED_MEDIAN_CELLS: usize = 7;
-
 /// Suffix of `reconstruct`'s filled-cell sidecar, beside the DSM (`<stem>_filled.tif`).
 pub const FILLED_SUFFIX: &str = "_filled.tif";
 
@@ -230,6 +206,12 @@ pub mod bands {
     /// `_confidence.tif`.
     pub const CONFIDENCE: Band = Band::Values {
         description: "matching confidence of the measured cell, 1 - S1/S2, 0 to 1",
+        unit: None,
+    };
+    /// `reconstruct-many`'s `_confidence.tif`: the pairs' confidences summed over the kept
+    /// cluster, so up to the number of pairs.
+    pub const SUMMED_CONFIDENCE: Band = Band::Values {
+        description: "summed matching confidence of the pairs in the kept cluster",
         unit: None,
     };
     /// `reconstruct-many`'s `_count.tif`.
@@ -316,25 +298,6 @@ pub fn filled_mask(measured: &Image, finished: &Image) -> Result<Image> {
         })
         .collect();
     Ok(Image::new(finished.width(), finished.height(), 1, values)?)
-}
-
-/// The post-processing of a gridded DSM: hole filling ([`camera::fill_holes`]), then a
-/// NaN-aware median filter over an odd `median_filter` window.
-pub fn finish_dsm(
-    mut dsm: Image,
-    fill: Option<HoleFill>,
-    median_filter: Option<usize>,
-) -> Result<Image> {
-    if let Some(fill) = fill {
-        dsm = camera::fill_holes(&dsm, fill).0;
-    }
-    if let Some(window) = median_filter {
-        if window % 2 == 0 {
-            bail!("the DSM median filter needs an odd window, got {window} cells");
-        }
-        dsm = camera::median_filter(&dsm, window);
-    }
-    Ok(dsm)
 }
 
 /// A grid of `resolution` metres over `bounds`, or over the points' extent, in `epsg` or the
@@ -453,6 +416,8 @@ fn check_dsm_output(flag: &str, output: &Path, inputs: &[&Path], overwrite: bool
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::finishing::finish_dsm;
+    use camera::HoleFill;
 
     /// The sidecar marks exactly the cells that were NaN before filling and have a height after.
     #[test]

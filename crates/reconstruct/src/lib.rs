@@ -21,7 +21,10 @@
 //! through [`reconstruct`] on one grid and [`fuse`] merges their measured cells.
 
 pub mod both_views;
+pub mod dsm;
 pub mod fabricated;
+pub mod finishing;
+pub mod flags;
 pub mod folder;
 pub mod fuse;
 pub mod many;
@@ -30,16 +33,14 @@ pub mod mosaic;
 pub mod options;
 pub mod plan;
 pub mod pointing;
+pub mod provenance;
 pub mod raw;
+pub mod rectify;
 pub mod sanity;
 pub mod scene;
 pub mod select;
 pub mod tile;
 pub mod workers;
-pub mod dsm;
-pub mod flags;
-pub mod provenance;
-pub mod rectify;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -51,11 +52,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::dsm::{DsmSummary, GridChoice};
-use eval::metrics::DsmScores;
-use workflow::matcher::Matcher;
-use workflow::progress::Progress;
 use crate::rectify::{altitude_range, camera_of, file_stem, given_altitude_range};
-use workflow::stage::write_json;
+use eval::metrics::DsmScores;
 use folder::TileFolder;
 use merge::{check_merge_memory, merge_tiles, MERGE_BLOCK_ROWS};
 use plan::{plan_tiles, Tile};
@@ -63,6 +61,9 @@ use raw::RawImage;
 use scene::Scene;
 use tile::{run_tile, tile_memory, tile_rectification, TileRecord, TileStatus};
 use workers::run_on_workers;
+use workflow::matcher::Matcher;
+use workflow::progress::Progress;
+use workflow::stage::write_json;
 
 pub use options::{default_work_dir, ReconstructOptions};
 
@@ -264,7 +265,12 @@ fn prepare(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<(OpenPa
     let stem = format!("{}-{}", file_stem(&opts.left)?, file_stem(&opts.right)?);
     let tiles = plan_tiles(roi, opts.tile, opts.collar, w, h);
     let grid = scene_grid(&opts.grid, &pair.rpc_left, roi, pair.alt_range)?;
-    let merge_memory = merge::merge_memory(&grid, &opts.finishing(), MERGE_BLOCK_ROWS);
+    let merge_memory = merge::merge_memory(
+        &grid,
+        &opts.finishing,
+        opts.matcher.gives_confidence(),
+        MERGE_BLOCK_ROWS,
+    );
     check_merge_memory(&grid, merge_memory, opts.max_memory)?;
     let plan = ScenePlan {
         work,
@@ -311,6 +317,9 @@ pub fn reconstruct(
         let scene = pair.scene(opts, &grid, &work, &stem, tiles.len() == 1);
         // Work has begun: a failure now (a full disk) leaves no DSM, and finished tiles.
         let run = run_tiles(opts, &scene, &tiles, &folder, progress).map_err(|e| {
+            if e.is::<TileTooLarge>() {
+                return e; // refused before any tile ran: an error, not a partial run
+            }
             workflow::outputs::Incomplete::Nothing {
                 message: format!(
                     "no DSM written: {}; the finished tiles stay in {}: fix the cause and rerun \
@@ -319,6 +328,7 @@ pub fn reconstruct(
                     work.display()
                 ),
             }
+            .into()
         })?;
         seconds.push(("tiles", t.elapsed().as_secs_f64()));
         run
@@ -362,7 +372,8 @@ pub fn reconstruct(
     }
     let t = Instant::now();
     summary.dsm = Some(merge_tiles(
-        &opts.finishing(),
+        &opts.finishing,
+        opts.matcher.gives_confidence(),
         &grid,
         &folder,
         &summary.records,
@@ -473,6 +484,12 @@ fn open_pair(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<OpenP
             },
         }
     } else {
+        progress.note(if opts.adjust_pointing {
+            "pointing: the cameras carry the scene's altitudes (min_alt/max_alt: a curated or \
+             adjusted set) and are used as given"
+        } else {
+            "pointing: the cameras are used as given (--no-pointing-correction)"
+        });
         altitude_range(opts.alt_range, &rpc_left, &rpc_right)?
     };
     sanity::check_pair(opts, (&left, &right), (&rpc_left, &rpc_right), alt_range)?;
@@ -507,7 +524,7 @@ impl OpenPair {
             alt_source: self.alt_source,
             matcher: &opts.matcher,
             grid,
-            gridding: opts.gridding,
+            gridding: opts.finishing.gridding,
             border: opts.border,
             keep: opts.keep_intermediates.then_some(work),
             stem,
@@ -564,7 +581,7 @@ fn scene_settings(
             grid.height,
             grid.epsg,
         ),
-        gridding: format!("{:?}", opts.gridding).to_lowercase(),
+        gridding: format!("{:?}", opts.finishing.gridding).to_lowercase(),
         matcher: opts.matcher.describe(),
         border: opts.border,
         both_views: opts.both_views,
@@ -655,6 +672,22 @@ fn estimate_tiles(scene: &Scene, tiles: &[&Tile]) -> (Vec<Result<Rectification>>
     (rects, memory)
 }
 
+/// A tile that does not fit in the memory budget, found before any tile runs.
+#[derive(Debug)]
+struct TileTooLarge(String);
+
+impl std::fmt::Display for TileTooLarge {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for TileTooLarge {}
+
+/// Disparity ranges wider than this, pixels, come from altitudes far wider than a city's:
+/// unknown altitudes or a camera of another image.
+const IMPLAUSIBLE_RANGE_PX: i32 = 400;
+
 /// The largest tile's estimated memory, refused when even that one tile does not fit in the
 /// budget.
 fn check_tile_memory(
@@ -664,24 +697,29 @@ fn check_tile_memory(
 ) -> Result<u64> {
     let largest = memory.iter().copied().max().unwrap_or(0);
     if !memory.is_empty() && largest + PROCESS_BYTES > opts.max_memory {
-        bail!(
+        let range = rects
+            .iter()
+            .zip(memory)
+            .max_by_key(|(_, m)| **m)
+            .and_then(|(r, _)| r.as_ref().ok().map(|r| r.disparity_range));
+        let range = match range {
+            None => "disparity range unknown".to_string(),
+            Some((lo, hi)) if hi - lo > IMPLAUSIBLE_RANGE_PX => format!(
+                "disparity range {lo}:{hi} px, too wide for real altitudes: give --alt-range, \
+                 and check that each camera is its image's (--rpc-left, --rpc-right)"
+            ),
+            Some((lo, hi)) => format!("disparity range {lo}:{hi} px"),
+        };
+        return Err(TileTooLarge(format!(
             "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
-             --max-memory {:.2} GiB: use a smaller --tile (now {} px) or a narrower \
-             --alt-range ({})",
+             --max-memory {:.2} GiB: raise --max-memory, use a smaller --tile (now {} px) or a \
+             narrower --alt-range ({range})",
             crate::flags::gib(largest),
             crate::flags::gib(PROCESS_BYTES),
             crate::flags::gib(opts.max_memory),
             opts.tile,
-            rects
-                .iter()
-                .zip(memory)
-                .max_by_key(|(_, m)| **m)
-                .and_then(|(r, _)| r.as_ref().ok().map(|r| r.disparity_range))
-                .map_or("disparity range unknown".into(), |(lo, hi)| format!(
-                    "disparity range {lo}:{hi} px; a range this wide usually means an RPC that is \
-                     not its image's: check --rpc-left and --rpc-right"
-                ))
-        );
+        ))
+        .into());
     }
     Ok(largest)
 }

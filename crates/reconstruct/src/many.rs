@@ -44,14 +44,15 @@ use super::select::{
 };
 use super::tile::TileStatus;
 use super::{footprint, reconstruct, score_against_truth, ReconstructOptions};
-use crate::dsm::{bands, finish_dsm, GridChoice, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS};
+use crate::dsm::{bands, GridChoice};
+use crate::finishing::{Finishing, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS};
+use crate::provenance::{delivery_files, grid_input, grid_json, InputFile, Product, RunRecord};
+use crate::rectify::{altitude_range, camera_of, file_stem};
 use eval::align::{align, AlignParams};
 use eval::metrics::DsmScores;
 use workflow::matcher::Matcher;
 use workflow::outputs::{check_output_file, check_output_folder, resolve};
 use workflow::progress::{Progress, Sequence};
-use crate::provenance::{delivery_files, grid_input, grid_json, InputFile, Product, RunRecord};
-use crate::rectify::{altitude_range, camera_of, file_stem};
 use workflow::stage::write_json;
 
 /// What to reconstruct from many acquisitions, and how.
@@ -87,10 +88,9 @@ pub struct ReconstructManyOptions {
     /// Weight each pair by its agreement with a first, equal-weight fusion ([`pair_weight`]);
     /// false (the default) keeps that equal-weight fusion.
     pub weight_pairs: bool,
-    /// Hole filling of the fused DSM, cells (only cells without a fused height are filled).
-    pub fill_holes: Option<usize>,
-    /// Median filter of the fused DSM, cells (odd).
-    pub median_filter: Option<usize>,
+    /// How the fused DSM is finished (only cells without a fused height are filled); its
+    /// gridding is also each pair's.
+    pub finishing: Finishing,
     /// Median filter of each pair's DSM before fusion, cells (odd); it never fills a cell.
     pub pair_median_filter: Option<usize>,
     /// Measure each pair's very narrow tiles from both views ([`super::both_views`]).
@@ -100,7 +100,6 @@ pub struct ReconstructManyOptions {
     /// Scene altitudes, metres (else from the JSONs or the RPCs).
     pub alt_range: Option<(f64, f64)>,
     pub matcher: Matcher,
-    pub gridding: Gridding,
     /// Tiles of each pair: side and collar, pixels.
     pub tile: usize,
     pub collar: usize,
@@ -168,7 +167,7 @@ impl ReconstructManyOptions {
                 "alt_range": o.alt_range,
                 "adjust_pointing": o.adjust_pointing,
                 "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
-                "gridding": format!("{:?}", o.gridding),
+                "gridding": format!("{:?}", o.finishing.gridding),
                 "tile": o.tile,
                 "collar": o.collar,
             }),
@@ -180,8 +179,8 @@ impl ReconstructManyOptions {
                     "min_confidence": o.min_confidence,
                     "co_register": o.co_register,
                     "weight_pairs": o.weight_pairs,
-                    "fill_holes": o.fill_holes,
-                    "median_filter": o.median_filter,
+                    "fill_holes": o.finishing.fill_holes.map(|f| f.span),
+                    "median_filter": o.finishing.median_filter,
                 }),
             },
         }
@@ -210,14 +209,17 @@ impl ReconstructManyOptions {
             min_confidence: None,
             co_register: false,
             weight_pairs: false,
-            fill_holes: Some(DEFAULT_FILL_CELLS),
-            median_filter: Some(FUSED_MEDIAN_CELLS),
+            finishing: Finishing::new(
+                Gridding::Median,
+                Some(DEFAULT_FILL_CELLS),
+                None,
+                Some(FUSED_MEDIAN_CELLS),
+            ),
             pair_median_filter: None,
             both_views: true,
             truth: None,
             alt_range: None,
             matcher,
-            gridding: Gridding::Median,
             tile: 1024,
             collar: 64,
             max_memory: 2 << 30,
@@ -658,9 +660,7 @@ fn pair_options(
     o.rpc_right = r.rpc_file.clone();
     o.alt_range = opts.alt_range;
     o.work_dir = Some(dir.join(format!("{}_work", pair.stem)));
-    o.gridding = opts.gridding;
-    o.fill_holes = None;
-    o.median_filter = opts.pair_median_filter;
+    o.finishing = Finishing::new(opts.finishing.gridding, None, None, opts.pair_median_filter);
     o.truth = opts.truth.clone();
     o.tile = opts.tile;
     o.collar = opts.collar;
@@ -766,10 +766,9 @@ fn write_fused(
         bands::SPREAD,
     )?;
     let confidences = Image::new(w, h, 1, fused.confidences)?;
-    write(&confidence_path, confidences, bands::CONFIDENCE)?;
+    write(&confidence_path, confidences, bands::SUMMED_CONFIDENCE)?;
     let dsm = Image::new(w, h, 1, fused.heights)?;
-    let fill = opts.fill_holes.map(camera::HoleFill::spanning);
-    let dsm = finish_dsm(dsm, fill, opts.median_filter)?;
+    let dsm = opts.finishing.finish(dsm)?;
     write_dsm(&opts.output, &dsm, grid)
         .with_context(|| format!("writing {}", opts.output.display()))?;
     Ok(FusedOutcome {

@@ -8,7 +8,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use anyhow::Result;
-use camera::{grid_writer, Band, DsmGrid, GridWindow, Gridding, Heights, HoleFill};
+use camera::{grid_writer, Band, DsmGrid, GridWindow, Heights};
 use raster::formats::cog::COG_TILE;
 use raster::formats::CogWriter;
 use raster::Image;
@@ -17,10 +17,9 @@ use rayon::prelude::*;
 use super::folder::TileFolder;
 use super::mosaic::Mosaic;
 use super::tile::{TileRecord, TileStatus};
-use crate::dsm::{
-    confidence_path, filled_mask, filled_path, finish_dsm, DsmSummary, DEFAULT_FILL_CELLS,
-    DEFAULT_FILL_REACH, DEFAULT_MEDIAN_CELLS,
-};
+use crate::dsm::{confidence_path, filled_mask, filled_path, DsmSummary};
+use crate::finishing::finish_dsm;
+use crate::finishing::Finishing;
 use crate::flags::gib;
 
 /// Rows of the DSM finished at once: a whole row of COG tiles (the writers then compress every
@@ -28,47 +27,6 @@ use crate::flags::gib;
 /// filling.
 pub const MERGE_BLOCK_ROWS: usize = COG_TILE;
 
-/// How the merged cells become the DSM (the options' gridding, hole filling and median filter).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Finishing {
-    pub gridding: Gridding,
-    pub fill_holes: Option<HoleFill>,
-    pub median_filter: Option<usize>,
-    /// Write the measured cells' confidence beside the DSM ([`confidence_path`]): the tiles
-    /// carry one (the classical matcher's).
-    pub confidence: bool,
-}
-
-impl Default for Finishing {
-    /// What a single pair's DSM gets by default: median gridding, filling along rays of
-    /// [`DEFAULT_FILL_CELLS`] up to [`DEFAULT_FILL_REACH`] cells from the data, a
-    /// [`DEFAULT_MEDIAN_CELLS`] median, the classical matcher's confidence beside it.
-    fn default() -> Self {
-        Finishing {
-            gridding: Gridding::Median,
-            fill_holes: Some(HoleFill {
-                span: DEFAULT_FILL_CELLS,
-                reach: DEFAULT_FILL_REACH,
-            }),
-            median_filter: Some(DEFAULT_MEDIAN_CELLS),
-            confidence: true,
-        }
-    }
-}
-
-impl Finishing {
-    /// Rows above and below a cell that its finished height depends on: the filling's rays walk
-    /// `span` cells (the diagonals as many rows), and the median reads `window / 2` rows of
-    /// filled cells.
-    pub fn halo(&self) -> usize {
-        let fill = self.fill_holes.map_or(0, |f| f.span);
-        fill.saturating_add(self.median_filter.map_or(0, |w| w / 2))
-    }
-}
-
-/// Peak bytes per cell of a block and its halo while it is finished: the mosaic (height +
-/// count), the measured, filled and filtered copies, the sidecar, and the tiles' cells read for
-/// it (height + count as float32).
 const BLOCK_BYTES_PER_CELL: u64 = 34;
 
 /// What the confidence adds per cell: its mosaic, its sidecar's rows and the tiles' band.
@@ -77,14 +35,19 @@ const CONFIDENCE_BYTES_PER_CELL: u64 = 12;
 /// Memory the assembly of the DSM needs, bytes: one block of `block_rows` rows with its halo
 /// (the whole grid when the halo reaches past it), and the two COG writers (per level a row of
 /// tiles waiting to be complete, and a block's compressed tiles and halved rows).
-pub fn merge_memory(grid: &DsmGrid, finishing: &Finishing, block_rows: usize) -> u64 {
+pub fn merge_memory(
+    grid: &DsmGrid,
+    finishing: &Finishing,
+    confidence: bool,
+    block_rows: usize,
+) -> u64 {
     let width = grid.width as u64;
     let halo = finishing.halo();
     let rows = block_rows
         .saturating_add(halo.saturating_mul(2))
         .min(grid.height) as u64;
     let per_cell = BLOCK_BYTES_PER_CELL
-        + if finishing.confidence {
+        + if confidence {
             CONFIDENCE_BYTES_PER_CELL
         } else {
             0
@@ -93,7 +56,7 @@ pub fn merge_memory(grid: &DsmGrid, finishing: &Finishing, block_rows: usize) ->
     let written = block_rows.min(grid.height) as u64;
     // The levels' widths halve: all of them together hold at most twice level 0's rows.
     let writer = width * 4 * (2 * (COG_TILE as u64 + 1) + 2 * written);
-    let writers = 2 + u64::from(finishing.confidence);
+    let writers = 2 + u64::from(confidence);
     block + writers * writer
 }
 
@@ -115,11 +78,12 @@ pub fn check_merge_memory(grid: &DsmGrid, merge_memory: u64, max_memory: u64) ->
 /// A tile's cells on the grid: column, row, width, height.
 type Cells = (usize, usize, usize, usize);
 
-/// Merges the finished tiles' cells into the DSM at `output` (and its filled-cell and
-/// confidence sidecars), `block_rows` rows at a time, finishing it on the way (holes, median
-/// filter).
+/// Merges the finished tiles' cells into the DSM at `output` (and its filled-cell sidecar, and
+/// with `confidence` the measured cells' confidence, which the classical matcher's tiles
+/// carry), `block_rows` rows at a time, finishing it on the way (holes, median filter).
 pub fn merge_tiles(
     finishing: &Finishing,
+    confidence: bool,
     grid: &DsmGrid,
     folder: &TileFolder,
     records: &[TileRecord],
@@ -144,8 +108,7 @@ pub fn merge_tiles(
     // Only when every tile's cells carry it (tiles of an earlier version, resumed, do not); a
     // sidecar left by an earlier run of this output would no longer match the DSM.
     let confidence_file = confidence_path(output);
-    let with_confidence =
-        finishing.confidence && parts.iter().all(|(r, _)| r.confidence == Some(true));
+    let with_confidence = confidence && parts.iter().all(|(r, _)| r.confidence == Some(true));
     let mut confidence_out = if with_confidence {
         Some(Output::create(
             &confidence_file,
@@ -254,11 +217,12 @@ fn failed(path: &Path, e: impl std::fmt::Display) -> anyhow::Error {
 mod tests {
     use super::super::fabricated::fabricate_tiles;
     use super::*;
-    use crate::dsm::{DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+    use crate::finishing::{DEFAULT_FILL_CELLS, DEFAULT_MEDIAN_CELLS};
+    use camera::{Gridding, HoleFill};
 
     /// The merge as it was before blocks: the whole grid at once, written whole.
     fn merge_whole_grid(
-        finishing: &Finishing,
+        (finishing, with_confidence): (&Finishing, bool),
         grid: &DsmGrid,
         folder: &TileFolder,
         records: &[TileRecord],
@@ -283,7 +247,7 @@ mod tests {
         camera::write_dsm(output, &finished, grid).unwrap();
         let bands = (crate::dsm::bands::FILLED, crate::dsm::bands::CONFIDENCE);
         camera::write_grid_raster(filled_path(output), &filled, grid, bands.0).unwrap();
-        if finishing.confidence {
+        if with_confidence {
             camera::write_grid_raster(confidence_path(output), &confidence, grid, bands.1).unwrap();
         }
         (points, finite(&measured), finite(&finished))
@@ -298,36 +262,35 @@ mod tests {
         let made = fabricate_tiles(&work, (300, 530), 64).unwrap();
         let folder = TileFolder::new(&work);
         let finishings = [
-            Finishing::default(),
-            Finishing {
-                gridding: Gridding::Median,
-                fill_holes: Some(HoleFill::spanning(DEFAULT_FILL_CELLS)),
-                median_filter: Some(DEFAULT_MEDIAN_CELLS),
-                confidence: true,
-            },
-            Finishing {
-                gridding: Gridding::Max,
-                fill_holes: Some(HoleFill::spanning(3)),
-                median_filter: Some(5),
-                confidence: true,
-            },
-            Finishing {
-                gridding: Gridding::Max,
-                fill_holes: None,
-                median_filter: None,
-                confidence: false,
-            },
+            (Finishing::default(), true),
+            (
+                Finishing::new(
+                    Gridding::Median,
+                    Some(DEFAULT_FILL_CELLS),
+                    None,
+                    Some(DEFAULT_MEDIAN_CELLS),
+                ),
+                true,
+            ),
+            (Finishing::new(Gridding::Max, Some(3), None, Some(5)), true),
+            (Finishing::new(Gridding::Max, None, None, None), false),
         ];
-        for finishing in finishings {
+        for (finishing, confidence) in finishings {
             let whole = dir.path().join("whole.tif");
-            let (points, measured, filled) =
-                merge_whole_grid(&finishing, &made.grid, &folder, &made.records, &whole);
+            let (points, measured, filled) = merge_whole_grid(
+                (&finishing, confidence),
+                &made.grid,
+                &folder,
+                &made.records,
+                &whole,
+            );
             assert!(measured < filled || finishing.fill_holes.is_none());
             assert!(filled < 300 * 530, "the voids stay empty");
             for block_rows in [32, 256] {
                 let out = dir.path().join(format!("blocks{block_rows}.tif"));
                 let s = merge_tiles(
                     &finishing,
+                    confidence,
                     &made.grid,
                     &folder,
                     &made.records,
@@ -339,12 +302,12 @@ mod tests {
                     (s.points, s.measured_cells, s.filled_cells),
                     (points, measured, filled)
                 );
-                assert_eq!(confidence_path(&out).is_file(), finishing.confidence);
+                assert_eq!(confidence_path(&out).is_file(), confidence);
                 let mut files = vec![
                     (whole.clone(), out.clone()),
                     (filled_path(&whole), filled_path(&out)),
                 ];
-                if finishing.confidence {
+                if confidence {
                     files.push((confidence_path(&whole), confidence_path(&out)));
                 }
                 for (a, b) in &files {
@@ -368,12 +331,18 @@ mod tests {
         let work = dir.path().join("work");
         let made = fabricate_tiles(&work, (100, 90), 64).unwrap();
         let folder = TileFolder::new(&work);
-        let finishing = Finishing {
-            confidence: true,
-            ..Finishing::default()
-        };
+        let finishing = Finishing::default();
         let out = dir.path().join("dsm.tif");
-        merge_tiles(&finishing, &made.grid, &folder, &made.records, &out, 32).unwrap();
+        merge_tiles(
+            &finishing,
+            true,
+            &made.grid,
+            &folder,
+            &made.records,
+            &out,
+            32,
+        )
+        .unwrap();
         let confidence = camera::read_dsm(confidence_path(&out), None).unwrap().image;
         let dsm = camera::read_dsm(filled_path(&out), None).unwrap().image;
         // Measured cells (0 in the filled sidecar) have a confidence in [0, 1], the others none.
@@ -384,7 +353,7 @@ mod tests {
         let mut older = made.records.clone();
         let done = older.iter().position(|r| r.cells.is_some()).unwrap();
         older[done].confidence = None;
-        merge_tiles(&finishing, &made.grid, &folder, &older, &out, 32).unwrap();
+        merge_tiles(&finishing, true, &made.grid, &folder, &older, &out, 32).unwrap();
         assert!(out.is_file() && !confidence_path(&out).exists());
     }
 
@@ -397,7 +366,6 @@ mod tests {
                 reach: 16,
             }),
             median_filter: Some(7),
-            confidence: true,
         };
         assert_eq!(default.halo(), 43);
         let none = Finishing {
@@ -407,20 +375,16 @@ mod tests {
         };
         assert_eq!(none.halo(), 0);
         let grid = DsmGrid::new(0.0, 0.0, 0.5, 50_000, 50_000, 32617).unwrap();
-        let bytes = merge_memory(&grid, &default, MERGE_BLOCK_ROWS);
+        let bytes = merge_memory(&grid, &default, true, MERGE_BLOCK_ROWS);
         assert!(bytes < 3 << 29, "{bytes} bytes for 50,000² cells");
-        let without = Finishing {
-            confidence: false,
-            ..default
-        };
-        let bytes = merge_memory(&grid, &without, MERGE_BLOCK_ROWS);
+        let bytes = merge_memory(&grid, &default, false, MERGE_BLOCK_ROWS);
         assert!(
             bytes < 1 << 30,
             "{bytes} bytes for 50,000² cells without confidence"
         );
         // A halo reaching past the grid: the whole grid is one block.
         let small = DsmGrid::new(0.0, 0.0, 0.5, 1000, 100, 32617).unwrap();
-        let whole = merge_memory(&small, &default, MERGE_BLOCK_ROWS);
+        let whole = merge_memory(&small, &default, true, MERGE_BLOCK_ROWS);
         assert_eq!(
             whole,
             1000 * 100 * (BLOCK_BYTES_PER_CELL + CONFIDENCE_BYTES_PER_CELL)

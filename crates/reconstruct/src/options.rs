@@ -4,15 +4,14 @@
 use std::path::{Path, PathBuf};
 
 use camera::rectify::Roi;
-use camera::{Gridding, HoleFill};
 use dataset::shard::Shard;
 use serde_json::json;
 
-use super::merge::Finishing;
-use crate::dsm::{GridChoice, DEFAULT_FILL_REACH};
+use crate::dsm::GridChoice;
+use crate::finishing::Finishing;
+use crate::provenance::{delivery_files, grid_input, grid_json, InputFile, Product, RunRecord};
 use workflow::matcher::Matcher;
 use workflow::outputs::resolve;
-use crate::provenance::{delivery_files, grid_input, grid_json, InputFile, Product, RunRecord};
 
 /// Tile side, left raw pixels: an affine rectification holds over about a kilometre.
 pub const DEFAULT_TILE: usize = 1024;
@@ -42,15 +41,8 @@ pub struct ReconstructOptions {
     /// Folder of the tiles' records and cells; `<output without extension>_work` when `None`.
     pub work_dir: Option<PathBuf>,
     pub grid: GridChoice,
-    pub gridding: Gridding,
-    /// Hole filling distance in cells, the rays' length (see [`camera::fill_holes`]); `None`:
-    /// no filling.
-    pub fill_holes: Option<usize>,
-    /// Cells at most between a filled cell and the nearest measured one
-    /// ([`camera::HoleFill::reach`]); capped at `fill_holes`.
-    pub fill_reach: usize,
-    /// Median filter window of the DSM, cells (odd); `None`: none.
-    pub median_filter: Option<usize>,
+    /// How the merged cells become the DSM: gridding, hole filling, median filter.
+    pub finishing: Finishing,
     /// Pixels of the rectified disparity ignored at each border.
     pub border: usize,
     /// A ground-truth `<AOI>_DSM.tif` (its `_CLS.tif` beside it) to score the DSM against; the
@@ -96,20 +88,6 @@ pub struct ReconstructOptions {
 }
 
 impl ReconstructOptions {
-    /// How the merged cells become the DSM: these options' gridding, filling and median.
-    pub fn finishing(&self) -> Finishing {
-        let opts = self;
-        Finishing {
-            gridding: opts.gridding,
-            fill_holes: opts.fill_holes.map(|span| HoleFill {
-                span,
-                reach: opts.fill_reach.min(span),
-            }),
-            median_filter: opts.median_filter,
-            confidence: opts.matcher.gives_confidence(),
-        }
-    }
-
     /// The record of this run in its work folder ([`crate::provenance`]; also each pair's of
     /// `reconstruct-many`).
     pub fn run_record(&self) -> RunRecord {
@@ -137,7 +115,7 @@ impl ReconstructOptions {
                 "alt_range": o.alt_range,
                 "matcher": { "kind": o.matcher.kind(), "settings": o.matcher.settings() },
                 "grid": grid_json(&o.grid),
-                "gridding": format!("{:?}", o.gridding),
+                "gridding": format!("{:?}", o.finishing.gridding),
                 "border": o.border,
                 "tile": o.tile,
                 "collar": o.collar,
@@ -147,11 +125,7 @@ impl ReconstructOptions {
             }),
             product: Product {
                 output: resolve(&o.output),
-                finishing: json!({
-                    "fill_holes": o.fill_holes,
-                    "fill_reach": o.fill_reach,
-                    "median_filter": o.median_filter,
-                }),
+                finishing: o.finishing.record(),
             },
         }
     }
@@ -164,7 +138,6 @@ impl ReconstructOptions {
         grid: GridChoice,
         output: PathBuf,
     ) -> Self {
-        let finishing = Finishing::default();
         ReconstructOptions {
             left,
             right,
@@ -177,10 +150,7 @@ impl ReconstructOptions {
             output,
             work_dir: None,
             grid,
-            gridding: finishing.gridding,
-            fill_holes: finishing.fill_holes.map(|f| f.span),
-            fill_reach: finishing.fill_holes.map_or(DEFAULT_FILL_REACH, |f| f.reach),
-            median_filter: finishing.median_filter,
+            finishing: Finishing::default(),
             border: 0,
             truth: None,
             tile: DEFAULT_TILE,
@@ -269,36 +239,4 @@ impl ReconstructOptions {
 /// The default work folder of an output DSM: `out/dsm.tif` → `out/dsm_work`.
 pub fn default_work_dir(output: &Path) -> PathBuf {
     crate::dsm::sidecar_path(output, "_work")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::dsm::DEFAULT_FILL_CELLS;
-
-    /// The options' rays and reach become the finishing's, the reach never past the rays (a
-    /// cell's nearest ray end is within them anyway), and no filling stays none.
-    #[test]
-    fn the_options_fill_within_their_reach() {
-        let mut o = ReconstructOptions::new(
-            "l.tif".into(),
-            "r.tif".into(),
-            workflow::matcher::Matcher::Classical(Default::default()),
-            crate::dsm::GridChoice::Like("t.tif".into()),
-            "o.tif".into(),
-        );
-        assert_eq!(o.finishing(), Finishing::default());
-        let fill = |o: &ReconstructOptions| o.finishing().fill_holes;
-        assert_eq!(
-            fill(&o),
-            Some(HoleFill {
-                span: DEFAULT_FILL_CELLS,
-                reach: DEFAULT_FILL_REACH
-            })
-        );
-        o.fill_reach = 1000;
-        assert_eq!(fill(&o), Some(HoleFill::spanning(DEFAULT_FILL_CELLS)));
-        o.fill_holes = None;
-        assert_eq!(fill(&o), None);
-    }
 }

@@ -20,9 +20,9 @@ use camera::RpcModel;
 use raster::formats::{write_homographies, write_npy};
 use raster::Image;
 
+use crate::raw::RawImage;
 use workflow::pairs::{PairFolder, PairPaths, RectifiedFiles, RectifyRecord};
 use workflow::progress::{track, Progress};
-use crate::raw::RawImage;
 use workflow::stage::write_json;
 
 /// What to rectify and where.
@@ -120,8 +120,13 @@ pub(crate) fn camera_of(
         None => bail!(
             "{}: no RPC camera: the image has no RPC tag 50844 and no sidecar beside it \
              (<name>.RPB, <name>_RPC.TXT, or a DIMAP RPC_<name>.XML); put the vendor's camera \
-             file there, or pass --rpc-{which} with it (or a SatNeRF/rpcm JSON)",
-            image_path.display()
+             file there, or {}",
+            image_path.display(),
+            match which {
+                "left" | "right" => format!("pass --rpc-{which} with it (or a SatNeRF/rpcm JSON)"),
+                _ =>
+                    "pass --rpc-dir, a folder holding <image stem>.json (SatNeRF/rpcm JSON)".into(),
+            }
         ),
     }
 }
@@ -295,10 +300,7 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
         alt_range,
         alt_source,
     };
-    write_json(
-        &report,
-        &rectify_record(&raw, rect, right_coverage, &files),
-    )?;
+    write_json(&report, &rectify_record(&raw, rect, right_coverage, &files))?;
     let PairPaths {
         left: left_path,
         right: right_path,
@@ -325,8 +327,8 @@ pub fn rectify(opts: &RectifyOptions, progress: &dyn Progress) -> Result<Rectify
 #[cfg(test)]
 mod tests {
     use super::*;
-    use workflow::Silent;
     use raster::geometry::warp_homography;
+    use workflow::Silent;
 
     /// A procedural world's rectified pair "un-rectified" into raw images, with its RPC JSONs.
     fn raw_world(dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf, world::World) {

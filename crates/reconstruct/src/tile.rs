@@ -17,9 +17,9 @@ use super::both_views::{both_views_cells, right_view_disparity, view_cells, want
 use super::plan::Tile;
 use super::raw::RawImage;
 use super::scene::{core_mask, Scene};
+use crate::rectify::{right_coverage, RawInputs};
 use workflow::matcher::{Matcher, RangeSource};
 use workflow::pairs::PairFolder;
-use crate::rectify::{right_coverage, RawInputs};
 use workflow::stage::write_json;
 use workflow::Silent;
 

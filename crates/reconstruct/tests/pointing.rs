@@ -8,10 +8,10 @@ use std::path::Path;
 use camera::{Gauge, ImageFit, RpcModel};
 use matching::SgmParams;
 use reconstruct::dsm::GridChoice;
-use workflow::matcher::Matcher;
 use reconstruct::many::{reconstruct_many, ReconstructManyOptions};
 use reconstruct::pointing::{adjust_views, tie_pairs, Pointing, TieView};
 use reconstruct::raw::RawImage;
+use workflow::matcher::Matcher;
 use workflow::Silent;
 
 use testdata::{jax, JAX_DEV};

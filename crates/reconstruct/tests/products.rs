@@ -8,14 +8,14 @@ use std::path::{Path, PathBuf};
 
 use camera::{read_dsm, DsmGrid, Heights, UtmZone};
 use matching::SgmParams;
-use reconstruct::dsm::GridChoice;
-use workflow::matcher::Matcher;
-use reconstruct::many::{reconstruct_many, ReconstructManyOptions};
-use reconstruct::{reconstruct, ReconstructOptions};
-use workflow::Silent;
 use products::Products;
 use raster::formats::read_tiff;
 use raster::Image;
+use reconstruct::dsm::GridChoice;
+use reconstruct::many::{reconstruct_many, ReconstructManyOptions};
+use reconstruct::{reconstruct, ReconstructOptions};
+use workflow::matcher::Matcher;
+use workflow::Silent;
 
 use testdata::{jax, JAX_DEV};
 

@@ -8,11 +8,12 @@
 
 use std::path::Path;
 
-use camera::UtmZone;
+use camera::{Gridding, UtmZone};
 use matching::SgmParams;
 use reconstruct::dsm::GridChoice;
-use workflow::matcher::Matcher;
+use reconstruct::finishing::{Finishing, DEFAULT_FILL_REACH};
 use reconstruct::{reconstruct, ReconstructOptions};
+use workflow::matcher::Matcher;
 use workflow::Silent;
 
 use testdata::jax;
@@ -39,8 +40,12 @@ fn options(l: &str, r: &str, out: &Path) -> ReconstructOptions {
 fn reconstruct_pair(l: &str, r: &str, fill: Option<usize>) -> (f64, f64, f64) {
     let dir = tempfile::tempdir().unwrap();
     let opts = ReconstructOptions {
-        fill_holes: fill,
-        median_filter: fill.map(|_| 7),
+        finishing: Finishing::new(
+            Gridding::Median,
+            fill,
+            Some(DEFAULT_FILL_REACH),
+            fill.map(|_| 7),
+        ),
         keep_intermediates: true,
         ..options(l, r, dir.path())
     };
@@ -106,7 +111,12 @@ fn the_fill_reach_leaves_the_wrong_middles_of_wide_holes_empty_on_006_020() {
         ..options("006", "020", dir.path())
     };
     let unlimited = ReconstructOptions {
-        fill_reach: reconstruct::dsm::DEFAULT_FILL_CELLS,
+        finishing: Finishing::new(
+            Gridding::Median,
+            Some(reconstruct::finishing::DEFAULT_FILL_CELLS),
+            None,
+            reach.finishing.median_filter,
+        ),
         merge_only: true,
         output: dir.path().join("unlimited.tif"),
         ..reach.clone()
@@ -194,10 +204,7 @@ fn tiles_of_256_pixels_match_the_untiled_dsm_and_resume() {
     };
     let tiled = reconstruct(&tiled_opts, &Silent).unwrap();
     assert_eq!(tiled.records.len(), 9, "3 × 3 tiles of a 788 × 742 crop");
-    assert_eq!(
-        tiled.count(reconstruct::tile::TileStatus::Done),
-        9
-    );
+    assert_eq!(tiled.count(reconstruct::tile::TileStatus::Done), 9);
     let (a, b) = (
         whole.scores.unwrap().mae_filtered.unwrap(),
         tiled.scores.unwrap().mae_filtered.unwrap(),
@@ -227,11 +234,9 @@ fn very_narrow_pair_014_020_is_measured_from_both_views() {
     assert_eq!(single.records[0].both_views, None);
     let ppm = both.records[0].pixels_per_metre.unwrap();
     assert!(ppm < 0.3, "014-020's slope {ppm} px/m");
-    let mae = |s: &reconstruct::ReconstructSummary| {
-        s.scores.as_ref().unwrap().mae_filtered.unwrap()
-    };
-    let measured =
-        |s: &reconstruct::ReconstructSummary| s.dsm.as_ref().unwrap().measured_cells;
+    let mae =
+        |s: &reconstruct::ReconstructSummary| s.scores.as_ref().unwrap().mae_filtered.unwrap();
+    let measured = |s: &reconstruct::ReconstructSummary| s.dsm.as_ref().unwrap().measured_cells;
     let (m2, m1) = (mae(&both), mae(&single));
     let (c2, c1) = (measured(&both), measured(&single));
     eprintln!("014-020: both views {m2:.3} m ({c2} cells measured), left view {m1:.3} m ({c1})");

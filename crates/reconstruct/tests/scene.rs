@@ -7,9 +7,10 @@ use std::path::{Path, PathBuf};
 use camera::{read_dsm, Gridding};
 use matching::SgmParams;
 use reconstruct::dsm::GridChoice;
-use workflow::matcher::Matcher;
+use reconstruct::finishing::Finishing;
 use reconstruct::tile::TileStatus;
 use reconstruct::{reconstruct, ReconstructOptions, ReconstructSummary};
+use workflow::matcher::Matcher;
 use workflow::Silent;
 
 const SIZE: usize = 320;
@@ -35,9 +36,7 @@ fn options(root: &Path, out: &Path, tile: usize) -> ReconstructOptions {
         rpc_right: Some(root.join("rpc/W11_B.json")),
         truth: Some(truth.clone()),
         // The benchmark's gridding and no post-processing: what tiling changes shows unblurred.
-        gridding: Gridding::Max,
-        fill_holes: None,
-        median_filter: None,
+        finishing: Finishing::new(Gridding::Max, None, None, None),
         tile,
         collar: 32,
         ..ReconstructOptions::new(

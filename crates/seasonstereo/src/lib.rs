@@ -11,16 +11,22 @@
 //! | raw pair → rectified pair | [`rectify`] | [`RectifyOptions`] → [`RectifySummary`] |
 //! | rectified pair → disparity | [`predict`] | [`Matcher`], [`RangeSource`] → [`Matched`] |
 //! | disparity → DSM | [`dsm`] | [`DsmOptions`] → [`DsmSummary`] |
-//! | raw pair → DSM, tiled, resumable | [`reconstruct`] | [`ReconstructOptions`] → [`ReconstructSummary`] |
+//! | raw pair → DSM, tiled, resumable | [`reconstruct`](fn@reconstruct) | [`ReconstructOptions`] → [`ReconstructSummary`] |
 //! | many dates → best pairs → one fused DSM | [`reconstruct_many`] | [`ReconstructManyOptions`] → [`ReconstructManySummary`] |
 //! | DSM → benchmark scores | [`score`] | [`Truth`] → [`DsmScores`] |
 //! | two DSMs → scores on the cells both cover | [`score_against`] | [`Truth`] → [`Versus`] |
-//! | disparities of a split → Table 1 | [`eval`] | [`EvalOptions`] → [`EvalReport`] |
+//! | disparities of a split → Table 1 | [`eval`](fn@eval) | [`EvalOptions`] → [`EvalReport`] |
 //! | the training set | [`stages`] | teacher → curate → synthesize → masks → dataset build |
 //!
 //! Conventions: pairs are rectified (epipolar lines are rows); disparity lives on the left view,
 //! `x_R = x_L − d`, positive and growing with altitude; invalid pixels are NaN. DSMs are float32
 //! Cloud-Optimized GeoTIFFs on a UTM grid, NaN where no point fell.
+//!
+//! Beside the functions above, each job's own items live in a small module: [`stages`],
+//! [`jobs`] (the Slurm submissions' helpers), [`world`], [`demo`], `train` (feature `network`),
+//! [`bench`](mod@bench) (what `seasonstereo bench` times) and [`benchmark`] (the evaluation's splits and
+//! rules); the front ends share [`flags`] (options as typed), [`defaults`] and [`outputs`] (the
+//! outputs' guards).
 //!
 //! Long calls report progress through a [`Progress`] (the CLI draws bars; [`Silent`] draws
 //! nothing). Errors are [`anyhow::Error`]s whose text names the file and the fix; the underlying
@@ -47,38 +53,53 @@
 
 use std::path::Path;
 
+pub use ::jobs::{
+    ChainRequest, ChainStatus, ChainSubmitted, JobStatus, Resources, SlurmRequest, StageLine,
+    StageStatus, Submitted, Units,
+};
 pub use anyhow::{Error, Result};
 pub use camera::rectify::Roi;
 pub use camera::{read_dsm, Crs, DsmGrid, DsmRaster, Gridding, Heights, RpcModel, UtmZone};
 pub use dataset::Shard;
-pub use matching::SgmParams;
-pub use reconstruct::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
 pub use eval::metrics::DsmScores;
+pub use eval::score::truth_zone;
 pub use eval::{CellsMae, EvalOptions, EvalReport, Truth, Versus};
-pub use jobs::{
-    ChainRequest, ChainStatus, ChainSubmitted, JobStatus, Resources, SlurmRequest, StageLine,
-    StageStatus, Submitted, Units,
+pub use matching::{Aggregation, SgmParams};
+#[cfg(feature = "network")]
+pub use nn::device::DeviceChoice;
+#[cfg(feature = "network")]
+pub use nn::infer::Normalisation;
+pub use products::{OrthoBlend, Products, ProductsWritten};
+pub use raster::Image;
+pub use reconstruct::dsm::{Comparison, DsmOptions, DsmSummary, GridChoice};
+pub use reconstruct::finishing::Finishing;
+pub use reconstruct::fuse::{Agreement, FusionParams};
+pub use reconstruct::many::{
+    auto_min_confidence, auto_min_support, FusedOutcome, PairOutcome, PairStatus,
+    ReconstructManyOptions, ReconstructManySummary, MIN_CONFIDENCE_PER_PAIR,
 };
+pub use reconstruct::rectify::{RectifyOptions, RectifySummary};
+pub use reconstruct::select::{PairChoice, PairTerms, View};
+pub use reconstruct::tile::{TileRecord, TileStatus};
+pub use reconstruct::{ReconstructOptions, ReconstructSummary, ScenePlan};
 #[cfg(feature = "network")]
 pub use workflow::matcher::MonsterOptions;
 pub use workflow::matcher::{Matched, Matcher, RangeSource};
 pub use workflow::outputs::Incomplete;
-pub use reconstruct::fuse::{Agreement, FusionParams};
-pub use reconstruct::many::{
-    auto_min_confidence, auto_min_support, FusedOutcome, PairOutcome, PairStatus,
-    ReconstructManyOptions, ReconstructManySummary, DEFAULT_PAIRS, MIN_CONFIDENCE_PER_PAIR,
-};
-pub use reconstruct::select::{PairChoice, PairTerms, View};
-pub use reconstruct::tile::{TileRecord, TileStatus};
-pub use reconstruct::{ReconstructOptions, ReconstructSummary, ScenePlan};
-pub use reconstruct::rectify::{RectifyOptions, RectifySummary};
-pub use eval::score::truth_zone;
-pub use reconstruct::flags;
+pub use workflow::progress::track;
 pub use workflow::{Progress, Silent};
-pub use products::{OrthoBlend, Products, ProductsWritten};
-pub use raster::Image;
 
+pub mod bench;
+pub mod benchmark;
+pub mod defaults;
+pub mod demo;
+pub mod flags;
+pub mod jobs;
+pub mod outputs;
 pub mod stages;
+#[cfg(feature = "network")]
+pub mod train;
+pub mod world;
 
 /// The plan of a reconstruction without running it: the tiles, the DSM grid, every tile's
 /// estimated memory and the merge's. Nothing is written.
@@ -93,18 +114,18 @@ pub fn submit_slurm_reconstruct(
     options: &ReconstructOptions,
     request: &SlurmRequest,
 ) -> Result<Submitted> {
-    jobs::submit_reconstruct(options, request)
+    ::jobs::submit_reconstruct(options, request)
 }
 
 /// The tiles of the submission in `work`: done, failed (with their errors), missing.
 pub fn job_status(work: &Path) -> Result<JobStatus> {
-    jobs::status(work)
+    ::jobs::status(work)
 }
 
 /// Submits again only the array tasks of `work` whose tiles failed or are missing, and a merge
 /// after them; with `wait`, until the merge ends.
 pub fn resubmit_slurm(work: &Path, wait: bool) -> Result<Submitted> {
-    jobs::resubmit(work, wait)
+    ::jobs::resubmit(work, wait)
 }
 
 /// Submits a chain of sharded stages to Slurm: one array job per stage, a check step after
@@ -112,18 +133,18 @@ pub fn resubmit_slurm(work: &Path, wait: bool) -> Result<Submitted> {
 /// `--kill-on-invalid-dep=yes`. Scripts, shard markers and `jobs/chain.json` go into the work
 /// folder.
 pub fn submit_slurm_chain(request: &ChainRequest) -> Result<ChainSubmitted> {
-    jobs::submit_chain(request)
+    ::jobs::submit_chain(request)
 }
 
 /// The shards of every stage of the chain in `work`: done, failed (exit code, log), missing.
 pub fn chain_status(work: &Path) -> Result<ChainStatus> {
-    jobs::chain_status(work)
+    ::jobs::chain_status(work)
 }
 
 /// Submits again the failed and missing shards of the chain's first unfinished stage and every
 /// later stage; with `wait`, until the last stage ends.
 pub fn resubmit_slurm_chain(work: &Path, wait: bool) -> Result<ChainSubmitted> {
-    jobs::resubmit_chain(work, wait)
+    ::jobs::resubmit_chain(work, wait)
 }
 
 /// Rectifies a raw satellite pair from its RPC cameras (epipolar lines become rows) into the
@@ -174,7 +195,7 @@ pub fn reconstruct(
 }
 
 /// Many acquisitions of one area → one DSM: the best pairs by date gap, convergence, incidence
-/// and sun angles (`options.pairs` of them), each through [`reconstruct`] without hole filling on
+/// and sun angles (`options.pairs` of them), each through [`reconstruct`](fn@reconstruct) without hole filling on
 /// one common grid, fused cell by cell (strongest height cluster, its median), holes filled only
 /// where no pair measured or too few agreed; writes the DSM, `<stem>_count.tif`, `<stem>_spread.tif` and
 /// `<stem>_report.json`. With `options.dry_run` it only chooses the pairs. A pair that fails is

@@ -7,16 +7,31 @@
 //! Every stage works item by item: it skips the items a previous run finished, runs only its
 //! share with a [`dataset::Shard`], writes its records atomically, and reports what it did.
 
+use std::path::{Path, PathBuf};
+
 use crate::{Progress, Result};
 
-pub use workflow::stage::BatchSummary;
+pub use dataset::Subset;
+#[cfg(feature = "network")]
+pub use stages::curate::features::Dinov3Similarity;
+pub use stages::curate::features::{FeatureSimilarity, HistogramDescriptor};
+pub use stages::curate::select::Keep;
+pub use stages::curate::{ColourStatistic, SsimScale};
 pub use stages::curate::{CurateOptions, CurateSummary};
 pub use stages::dataset_build::{BuildOptions, BuildSummary, MaskDirs};
+pub use stages::masks::heights::PairIndex;
+pub use stages::masks::score::{FolderScore, ImageScore};
 pub use stages::masks::MasksOptions;
+#[cfg(feature = "network")]
+pub use stages::masks::SegformerSegmenter;
+pub use stages::masks::{ImageSegmenter, MasksRecord, OfflineSegmenter, RulesSegmenter};
 pub use stages::synthesize::{SynthesizeOptions, SynthesizeSummary};
 pub use stages::teacher::TeacherOptions;
 pub use stages::world_training::{WorldTrainingOptions, WorldTrainingSummary};
-pub use synth::SeasonGenerator;
+pub use synth::api::{GeminiConfig, GeminiGenerator};
+pub use synth::prompts::Prompts;
+pub use synth::{BuiltinSeasons, Season, SeasonGenerator};
+pub use workflow::stage::BatchSummary;
 
 /// Teacher disparities (SGM, or MonSter++ with weights) for every real synchronic pair of
 /// `options.pairs_dir`: they supervise every synthetic combination of that pair.
@@ -43,6 +58,26 @@ pub fn synthesize(
 /// Water, tree and building masks from one segmentation per image.
 pub fn masks(options: &MasksOptions, progress: &dyn Progress) -> Result<BatchSummary> {
     stages::masks::run_masks(options, progress)
+}
+
+/// Scores the masks of `masks` (a [`masks`] output) against the DFC2019 classes beside the
+/// truth DSM `truth` (or `classes`), projected into each image through the truth and the
+/// image's camera `<rpc_dir>/<stem>.json`, the truth first registered by the median shift of
+/// the `register` DSMs (none: no shift).
+pub fn masks_score(
+    masks: &Path,
+    rpc_dir: &Path,
+    truth: &Path,
+    classes: Option<&Path>,
+    register: &[PathBuf],
+) -> Result<FolderScore> {
+    stages::masks::score::score_folder(masks, rpc_dir, truth, classes, register)
+}
+
+/// The markdown table of [`masks_score`]'s scores: one row per image, the mean over images and
+/// the pooled pixels, IoU / precision / recall per class.
+pub fn masks_table(scores: &[ImageScore]) -> String {
+    stages::masks::score::table(scores)
 }
 
 /// The training set in the layout the trainer reads: the season combinations of every pair,

@@ -41,13 +41,13 @@ use dataset::shard::Shard;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use crate::teacher::{self, TeacherRecord};
+use features::FeatureSimilarity;
+use select::{colour_normaliser, colour_score, joint_rank, rank_desc, Keep};
 use workflow::pairs::{PairFolder, PairPaths};
 use workflow::progress::Progress;
 use workflow::report::Report;
 use workflow::stage::{run_items, write_json, write_text, BatchSummary};
-use crate::teacher::{self, TeacherRecord};
-use features::FeatureSimilarity;
-use select::{colour_normaliser, colour_score, joint_rank, rank_desc, Keep};
 
 /// The percentile of `d_color` that sets `d_max`.
 pub const D_MAX_PERCENTILE: f64 = 95.0;

@@ -36,13 +36,11 @@ use raster::geometry::warp_homography;
 use raster::{Homography, Image, Mask};
 use serde::{Deserialize, Serialize};
 
+use crate::synthesize::{accepted_tags, selected_pairs, zero_invalid, CropRecord, SyntheticLayout};
+use crate::teacher::TeacherRecord;
 use workflow::pairs::PairFolder;
 use workflow::progress::Progress;
 use workflow::stage::write_text;
-use crate::synthesize::{
-    accepted_tags, selected_pairs, zero_invalid, CropRecord, SyntheticLayout,
-};
-use crate::teacher::TeacherRecord;
 
 /// Name of the experiment list of a validation split.
 pub const VAL_LIST: &str = "sub_val";
@@ -914,9 +912,7 @@ fn finalize(
         ),
     )?;
     let generator = match &opts.synthetic_dir {
-        Some(d) => {
-            crate::synthesize::recorded_generator(d)?.unwrap_or_else(|| "unknown".into())
-        }
+        Some(d) => crate::synthesize::recorded_generator(d)?.unwrap_or_else(|| "unknown".into()),
         None => "none".into(),
     };
     let mut manifest = Manifest::read_optional(&dir.manifest())?

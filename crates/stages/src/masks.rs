@@ -83,6 +83,10 @@ impl MasksRecord {
     }
 }
 
+/// The SegFormer layout of the release's weights (OpenEarthMap mit-b2): the preset
+/// [`SegformerSegmenter::load`] is given unless another is asked for.
+pub const SEGFORMER_PRESET: &str = "mit-b2";
+
 /// SegFormer with the release's weights.
 #[cfg(feature = "network")]
 pub struct SegformerSegmenter {

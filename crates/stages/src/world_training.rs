@@ -33,12 +33,12 @@ use raster::{Homography, Image};
 use synth::BuiltinSeasons;
 use world::{class, WorldParams};
 
-use workflow::matcher::Matcher;
-use workflow::progress::Progress;
 use crate::dataset_build::{run_build, BuildOptions, BuildSummary, MaskDirs};
 use crate::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter};
 use crate::synthesize::{run_synthesize, SynthesizeOptions, SynthesizeSummary};
 use crate::teacher::{run_teacher, TeacherOptions};
+use workflow::matcher::Matcher;
+use workflow::progress::Progress;
 
 /// What `dataset world` builds.
 #[derive(Clone, Debug)]

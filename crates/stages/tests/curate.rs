@@ -5,13 +5,13 @@ use std::path::Path;
 
 use dataset::Shard;
 use matching::SgmParams;
-use workflow::matcher::Matcher;
+use raster::Image;
 use stages::curate::features::HistogramDescriptor;
 use stages::curate::select::{roc_auc, Keep};
 use stages::curate::{run_curate, ColourStatistic, CurateOptions, SsimScale};
 use stages::teacher::{run_teacher, TeacherOptions};
+use workflow::matcher::Matcher;
 use workflow::Silent;
-use raster::Image;
 
 const SIZE: usize = 112;
 

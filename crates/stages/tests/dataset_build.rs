@@ -9,15 +9,15 @@ use dataset::experiment::read_experiment_csv;
 use dataset::layout::{DatasetDir, MaskKind};
 use dataset::manifest::Manifest;
 use dataset::{load_sample, PairKind, PairStem, SampleIndex, Shard, Side, Subset};
-use workflow::matcher::Matcher;
 use stages::dataset_build::{run_build, BuildOptions, MaskDirs};
 use stages::synthesize::{run_synthesize, SynthesizeOptions};
 use stages::teacher::{run_teacher, TeacherOptions};
 use stages::world_training::{
     build_world_training, world_ids, world_range, write_world_sources, WorldTrainingOptions,
 };
-use workflow::Silent;
 use synth::BuiltinSeasons;
+use workflow::matcher::Matcher;
+use workflow::Silent;
 
 const SIZE: usize = 96;
 

@@ -210,10 +210,7 @@ fn bad_inputs_are_explained() {
         &raster::Image::filled(4, 4, 3, 1.0),
     )
     .unwrap();
-    let err = format!(
-        "{:#}",
-        stages::masks::list_images(&images).unwrap_err()
-    );
+    let err = format!("{:#}", stages::masks::list_images(&images).unwrap_err());
     assert!(err.contains("same stem"), "{err}");
 }
 
@@ -247,8 +244,7 @@ fn rules_segmenter_on_unseen_worlds_with_exact_heights() {
             pairs: vec![],
         };
         let options = MaskKind::ALL.map(dataset::segmentation::MaskOptions::defaults);
-        let s = stages::masks::rules::segment(&w.left.image, Some(&heights), &options)
-            .unwrap();
+        let s = stages::masks::rules::segment(&w.left.image, Some(&heights), &options).unwrap();
         for (k, (kind, id)) in [
             (MaskKind::Tree, class::TREE),
             (MaskKind::Building, class::BUILDING),

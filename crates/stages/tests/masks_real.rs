@@ -9,16 +9,15 @@ use std::path::Path;
 
 use matching::SgmParams;
 use reconstruct::dsm::GridChoice;
-use workflow::matcher::Matcher;
+use reconstruct::finishing::Finishing;
 use reconstruct::{reconstruct, ReconstructOptions};
 use stages::dataset_build::rectify_mask;
 use stages::masks::heights::PairIndex;
 use stages::masks::score::{
     read_masks, registration, score_folder, score_masks, ClassTruth, ImageScore,
 };
-use stages::masks::{
-    run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter,
-};
+use stages::masks::{run_masks, ImageSegmenter, MasksOptions, OfflineSegmenter, RulesSegmenter};
+use workflow::matcher::Matcher;
 use workflow::Silent;
 
 use testdata::jax;
@@ -61,8 +60,11 @@ fn rules_with_heights_find_the_trees_and_buildings_of_014_015() {
             rpc_left: Some(jax("rpcs/ba/JAX_068_014_RGB.json")),
             rpc_right: Some(jax("rpcs/ba/JAX_068_015_RGB.json")),
             work_dir: Some(pairs.clone()),
-            fill_holes: None,
-            median_filter: None,
+            finishing: Finishing {
+                fill_holes: None,
+                median_filter: None,
+                ..Finishing::default()
+            },
             keep_intermediates: true,
             ..ReconstructOptions::new(
                 images.join("JAX_068_014_RGB.tif"),

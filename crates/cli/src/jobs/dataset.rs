@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use jobs::script::{quote, split};
+use seasonstereo::jobs::{array_spec, jobs_dir, quote, split};
 use seasonstereo::{chain_status, resubmit_slurm_chain, submit_slurm_chain, ChainRequest};
 use seasonstereo::{ChainStatus, ChainSubmitted, StageLine};
 
@@ -286,9 +286,9 @@ fn report(s: &ChainSubmitted, work: &Path) -> Result<()> {
     println!(
         "submitted from stage {} (array tasks {}): {}; scripts and logs in {}",
         s.first.0,
-        jobs::status::array_spec(&s.first.1),
+        array_spec(&s.first.1),
         jobs.join(" "),
-        jobs::record::jobs_dir(work).display()
+        jobs_dir(work).display()
     );
     let shown = quote(&work.display().to_string());
     println!("follow: seasonstereo jobs status --work {shown}");
@@ -309,9 +309,7 @@ fn outcome(code: i32, work: &Path) -> Result<()> {
         0 => Ok(()),
         c => bail!(
             "every shard finished but the finalize job exited {c}: see its log in {}",
-            jobs::record::jobs_dir(work)
-                .join("logs")
-                .display()
+            jobs_dir(work).join("logs").display()
         ),
     }
 }

@@ -10,10 +10,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use jobs::script::{quote, split};
-use workflow::outputs::Incomplete;
+use seasonstereo::jobs::{array_spec, is_chain, quote, split};
 use seasonstereo::{
-    job_status, resubmit_slurm, submit_slurm_reconstruct, JobStatus, SlurmRequest, Submitted,
+    job_status, resubmit_slurm, submit_slurm_reconstruct, Incomplete, JobStatus, SlurmRequest,
+    Submitted,
 };
 
 use crate::reconstruct::ReconstructArgs;
@@ -164,7 +164,7 @@ pub fn run(a: JobsArgs, parse: dataset::ParseLine) -> Result<()> {
     match a.command {
         JobsCommand::Slurm(SlurmCommand::Reconstruct(r)) => slurm_reconstruct(*r),
         JobsCommand::Slurm(SlurmCommand::Dataset(d)) => dataset::submit(*d, parse),
-        JobsCommand::Status(s) if jobs::is_chain(&s.work.work) => {
+        JobsCommand::Status(s) if is_chain(&s.work.work) => {
             dataset::status(&s.work.work, s.stage.as_deref())
         }
         JobsCommand::Status(s) => match s.stage {
@@ -174,7 +174,7 @@ pub fn run(a: JobsArgs, parse: dataset::ParseLine) -> Result<()> {
             ),
             None => print_status(&job_status(&s.work.work)?),
         },
-        JobsCommand::Resubmit(r) if jobs::is_chain(&r.work.work) => {
+        JobsCommand::Resubmit(r) if is_chain(&r.work.work) => {
             dataset::resubmit(&r.work.work, r.wait)
         }
         JobsCommand::Resubmit(r) => {
@@ -234,7 +234,7 @@ fn report(s: &Submitted, work: &Path) -> Result<()> {
          (afterany); scripts and logs in {}",
         r.tiles.len(),
         s.tiles_job,
-        jobs::status::array_spec(&s.tasks),
+        array_spec(&s.tasks),
         r.tiles_per_task,
         s.merge_job,
         r.tiles_script.parent().unwrap_or(work).display()

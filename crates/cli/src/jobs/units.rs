@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use anyhow::Result;
-use jobs::script::quote;
-use workflow::outputs::Incomplete;
-use seasonstereo::Units;
+use seasonstereo::jobs::quote;
+use seasonstereo::outputs::first_names;
+use seasonstereo::{Incomplete, Units};
 
 /// One line per failed (with its error) and missing unit.
 pub(super) fn print_units(units: &Units) {
@@ -32,7 +32,7 @@ pub(super) fn incomplete(units: &Units, what: &str, work: &Path) -> Result<()> {
             "{} of {} {what} failed or missing ({}): resubmit them as above",
             names.len(),
             units.len(),
-            workflow::outputs::first_names(&names)
+            first_names(&names)
         ),
         failed: names,
     }

@@ -10,10 +10,10 @@ use synth::{BuiltinSeasons, Season};
 use world::WorldParams;
 
 use crate::season_variant;
+use eval::world_io::{image_ids, save_world};
 use eval::Split;
 use workflow::pairs::PairFolder;
 use workflow::progress::Progress;
-use eval::world_io::{image_ids, save_world};
 
 /// Held-out seeds start here above the ablation's seed (training worlds use `seed + k`,
 /// validation worlds `seed + 10000 + k`).

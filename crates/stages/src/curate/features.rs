@@ -15,6 +15,10 @@ pub trait FeatureSimilarity {
     fn similarity(&self, left: &Image, left_hat: &Image, valid: &Mask) -> Result<f64>;
 }
 
+/// The DINOv3 input normalisation unless another is asked for: `imagenet`, the HF processor's
+/// default (the other: `sat493m`).
+pub const DINOV3_NORMALISATION: &str = "imagenet";
+
 #[cfg(feature = "network")]
 pub use dinov3::Dinov3Similarity;
 

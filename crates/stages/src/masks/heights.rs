@@ -18,9 +18,8 @@ use camera::{Points, RpcModel, UtmZone};
 use raster::Image;
 
 use super::project::render_into_image;
-use reconstruct::dsm::{
-    finish_dsm, read_camera, triangulate_files, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS,
-};
+use reconstruct::dsm::{read_camera, triangulate_files};
+use reconstruct::finishing::{finish_dsm, DEFAULT_FILL_CELLS, FUSED_MEDIAN_CELLS};
 use workflow::pairs::{PairFolder, RectifiedFiles, RectifyRecord};
 
 /// Cell size of the heights grid, metres.

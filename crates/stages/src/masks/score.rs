@@ -21,8 +21,8 @@ use raster::{Image, Mask};
 
 use super::mask_path;
 use super::project::render_into_image;
-use reconstruct::dsm::read_camera;
 use eval::{align, AlignParams, Alignment};
+use reconstruct::dsm::read_camera;
 
 /// The benchmark's registration of the cameras' frame to the truth grid, cells: a DSM `pred`
 /// triangulated through the cameras matches the truth as `pred(x − dx, y − dy) ≈ truth(x, y)`
