@@ -24,7 +24,7 @@ enum DatasetCommand {
     /// disparities, subsets S1/S2/S3 and manifest, in the layout the trainer reads.
     Build(BuildArgs),
     /// A small training set (and validation set) from procedural worlds with exact ground
-    /// truth, made by the real stages: teacher (SGM), synthesize (built-in seasons), dataset build.
+    /// truth, made by the real stages: teacher (census + MGM), synthesize (built-in seasons), dataset build.
     World(WorldArgs),
 }
 
@@ -96,8 +96,8 @@ struct BuildArgs {
 #[command(
     after_help = "Writes a complete training set (the layout of `dataset build`) to OUT, \
     its sources to OUT/sources/{train,val}/ (pairs, raw images, class maps, segmentation files, \
-    teacher, exact disparities, variants). Training pairs are supervised by SGM \
-    (disparity_maps/sgm) with the exact disparity as LiDAR (disparity_maps/GT); the validation \
+    teacher, exact disparities, variants). Training pairs are supervised by the classical \
+    teacher, census + MGM (disparity_maps/sgm) with the exact disparity as LiDAR (disparity_maps/GT); the validation \
     split by the exact disparity (val/disparity, experiments/sub_val.csv).\n\n\
     Example (seconds on a laptop):\n  seasonstereo dataset world --size 128 --worlds 4 \
     --val-worlds 1 -o out/world-set\n  seasonstereo train --config tiny --data out/world-set"

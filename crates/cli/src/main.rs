@@ -141,7 +141,8 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Teacher disparities for every real synchronic pair.
     ///
-    /// SGM, or MonSter++ with weights; resumable and shardable.
+    /// The classical matcher (census + MGM), or MonSter++ with weights; resumable and
+    /// shardable.
     Teacher(teacher::TeacherArgs),
     /// Select the most consistent synchronic pairs.
     ///

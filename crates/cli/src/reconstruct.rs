@@ -126,8 +126,8 @@ pub struct ReconstructArgs {
     ///
     /// The disparity search covers them and little more: heights outside are not found; give
     /// them wide enough for the tallest building. Default: min_alt/max_alt of the JSON cameras,
-    /// else the altitudes of the tie points found to correct the pointing (their 0.5 and 99.5
-    /// percentiles, widened by 5 m and a tenth of their span).
+    /// else the altitudes of the tie points found to correct the pointing (their 3rd and 97th
+    /// percentiles, each point being seen twice; widened by 5 m and a tenth of their span).
     #[arg(long, value_name = "MIN:MAX", value_parser = parse_alt_range, allow_hyphen_values = true,
           help_heading = heading::QUALITY)]
     alt_range: Option<(f64, f64)>,

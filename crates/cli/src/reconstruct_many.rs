@@ -91,7 +91,8 @@ pub struct ReconstructManyArgs {
     images: Vec<PathBuf>,
     /// Folder of the cameras as SatNeRF/rpcm JSON, one `<image stem>.json` per image.
     ///
-    /// Dates and sun angles are read from them too. Default: the cameras found with the images.
+    /// Dates and sun angles are read from them too. Default: each image's vendor camera beside
+    /// it (.RPB, _RPC.TXT, DIMAP RPC XML), else its RPC tag, with the metadata beside it.
     #[arg(long, value_name = "DIR", help_heading = heading::INPUTS, display_order = 1)]
     rpc_dir: Option<PathBuf>,
     /// Output fused DSM (.tif): heights above the WGS84 ellipsoid, float32 COG.
@@ -168,8 +169,8 @@ pub struct ReconstructManyArgs {
     /// Fewest pairs that must agree for a cell to keep a measured height.
     ///
     /// Within the tolerance; other cells are filled like unmeasured ones. Default: 1 when the
-    /// pairs have confidences (--min-confidence decides), else 2, a quarter of the pairs from 12
-    /// pairs on, at most the number of pairs.
+    /// pairs have confidences (--min-confidence decides), else a quarter of the pairs rounded
+    /// up, at least 2 and at most the number of pairs.
     #[arg(long, value_name = "N", help_heading = heading::FUSION, hide_short_help = true)]
     min_support: Option<usize>,
     /// Least summed confidence of the agreeing pairs for a cell to keep a measured height.

@@ -15,7 +15,7 @@ use crate::args::{parse_range, report, MatcherArgs, ShardArg};
     synchronic_only/ layout or `seasonstereo rectify` outputs); writes OUT/<stem>.iio (float32, NaN = \
     no disparity) and OUT/teacher.json (which teacher). Existing disparities are kept (resumable); a \
     folder holds one teacher only.\n\n\
-    SGM range: --range, else PAIRS/rectify/<stem>.json (from `rectify`), else estimated from the \
+    Disparity range of the classical teacher: --range, else PAIRS/rectify/<stem>.json (from `rectify`), else estimated from the \
     images.\n\n\
     Examples:\n  seasonstereo teacher --pairs data/synchronic_only -o data/teacher/sgm\n  \
     seasonstereo teacher --pairs data/synchronic_only -o data/teacher/monster++ \\\n      \

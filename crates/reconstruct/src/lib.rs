@@ -484,12 +484,12 @@ fn open_pair(opts: &ReconstructOptions, progress: &dyn Progress) -> Result<OpenP
             },
         }
     } else {
-        progress.note(if opts.adjust_pointing {
-            "pointing: the cameras carry the scene's altitudes (min_alt/max_alt: a curated or \
-             adjusted set) and are used as given"
-        } else {
-            "pointing: the cameras are used as given (--no-pointing-correction)"
-        });
+        if opts.adjust_pointing {
+            progress.note(
+                "pointing: the cameras carry the scene's altitudes (min_alt/max_alt: a curated or \
+                 adjusted set) and are used as given",
+            );
+        }
         altitude_range(opts.alt_range, &rpc_left, &rpc_right)?
     };
     sanity::check_pair(opts, (&left, &right), (&rpc_left, &rpc_right), alt_range)?;
