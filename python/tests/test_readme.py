@@ -22,4 +22,7 @@ def test_the_readme_example_writes_a_dsm(dev, tmp_path, monkeypatch):
     scope: dict = {}
     exec(compile(code, "README.md", "exec"), scope)
     assert os.path.isfile(tmp_path / "out/py/006-020.tif")
-    assert scope["summary"]["dsm"]["coverage"] > 0.5
+    dsm = scope["summary"]["dsm"]
+    # Measured cells, and cells with a height once the holes are filled, over the grid of the
+    # left image's footprint (its corners lie outside the pair's overlap).
+    assert dsm["coverage"] > 0.35 and dsm["filled"] > 0.6, dsm
