@@ -16,20 +16,26 @@ LIMIT, CLI_LIMIT = 120, 40
 FN = re.compile(r"^\s*(?:pub(?:\([^)]*\))?\s+)?(?:const\s+|async\s+|unsafe\s+|extern\s+\"C\"\s+)*fn\s+(\w+)")
 
 
+def item_end(lines, start):
+    """The last line of the item starting at line `start`: its closing brace, or its `;`."""
+    depth, j, opened = 0, start, False
+    while j < len(lines):
+        depth += lines[j].count("{") - lines[j].count("}")
+        opened = opened or "{" in lines[j]
+        if opened and depth <= 0 or (not opened and lines[j].rstrip().endswith(";")):
+            break
+        j += 1
+    return j
+
+
 def test_module_lines(lines):
     """Line numbers inside `#[cfg(test)]` items."""
     skip, i = set(), 0
     while i < len(lines):
         if lines[i].strip() == "#[cfg(test)]":
-            depth, j, opened = 0, i + 1, False
-            while j < len(lines):
-                depth += lines[j].count("{") - lines[j].count("}")
-                opened = opened or "{" in lines[j]
-                skip.add(j)
-                if opened and depth <= 0 or (not opened and lines[j].rstrip().endswith(";")):
-                    break
-                j += 1
-            i = j
+            end = item_end(lines, i + 1)
+            skip.update(range(i + 1, end + 1))
+            i = end
         i += 1
     return skip
 
@@ -44,13 +50,7 @@ def long_functions(path, limit):
         m = FN.match(line)
         if not m or i in skip:
             continue
-        depth, j, opened = 0, i, False
-        while j < len(lines):
-            depth += lines[j].count("{") - lines[j].count("}")
-            opened = opened or "{" in lines[j]
-            if opened and depth <= 0 or (not opened and lines[j].rstrip().endswith(";")):
-                break
-            j += 1
+        j = item_end(lines, i)
         if j - i + 1 > limit:
             found.append((m.group(1), i + 1, j - i + 1))
     return found

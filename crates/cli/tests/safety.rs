@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 mod support;
-use support::{code, seasonstereo, stderr};
+use support::{code, damage_tiles, seasonstereo, stderr};
 
 /// A raw procedural pair: `(left, right, rpc_left, rpc_right)`.
 struct Scene {
@@ -264,26 +264,6 @@ fn every_subcommand_names_a_missing_input_once() {
         assert!(errors[0].contains("missing_input"), "{args:?}: {e}");
         assert_plain(&e);
     }
-}
-
-/// Overwrites the compressed data of the left image's TIFF tiles for which `hit(row, col)` holds
-/// (a damaged download): reading a window that touches one fails to decode.
-fn damage_tiles(path: &Path, hit: impl Fn(usize, usize) -> bool) {
-    use tiff::tags::Tag;
-    let file = std::fs::File::open(path).unwrap();
-    let mut decoder = tiff::decoder::Decoder::new(file).unwrap();
-    let (width, _) = decoder.dimensions().unwrap();
-    let tile_width = decoder.get_tag_u32(Tag::TileWidth).unwrap();
-    let across = width.div_ceil(tile_width) as usize;
-    let offsets = decoder.get_tag_u64_vec(Tag::TileOffsets).unwrap();
-    let counts = decoder.get_tag_u64_vec(Tag::TileByteCounts).unwrap();
-    let mut bytes = std::fs::read(path).unwrap();
-    for (i, (&offset, &count)) in offsets.iter().zip(&counts).enumerate() {
-        if hit(i / across, i % across) {
-            bytes[offset as usize..(offset + count) as usize].fill(0xA5);
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
 }
 
 fn stdout(o: &Output) -> String {

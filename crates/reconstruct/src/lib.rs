@@ -315,11 +315,10 @@ pub fn reconstruct(
     } else {
         let t = Instant::now();
         let scene = pair.scene(opts, &grid, &work, &stem, tiles.len() == 1);
+        // A tile that cannot fit is refused before any tile runs: an error, not a partial run.
+        let todo = tiles_to_run(opts, &scene, &tiles, &folder)?;
         // Work has begun: a failure now (a full disk) leaves no DSM, and finished tiles.
-        let run = run_tiles(opts, &scene, &tiles, &folder, progress).map_err(|e| {
-            if e.is::<TileTooLarge>() {
-                return e; // refused before any tile ran: an error, not a partial run
-            }
+        let run = run_tiles(&scene, todo, &folder, progress).map_err(|e| {
             workflow::outputs::Incomplete::Nothing {
                 message: format!(
                     "no DSM written: {}; the finished tiles stay in {}: fix the cause and rerun \
@@ -328,7 +327,6 @@ pub fn reconstruct(
                     work.display()
                 ),
             }
-            .into()
         })?;
         seconds.push(("tiles", t.elapsed().as_secs_f64()));
         run
@@ -603,15 +601,24 @@ struct TilesRun {
     largest: u64,
 }
 
-/// Runs this shard's unfinished tiles, as many at once as the memory budget allows, saving each
-/// one's record and cells as it ends.
-fn run_tiles(
+/// This shard's unfinished tiles, each with its rectification and estimated peak memory, and
+/// how many run at once.
+struct TilesToRun<'a> {
+    todo: Vec<&'a Tile>,
+    rects: Vec<Result<Rectification>>,
+    memory: Vec<u64>,
+    in_flight: usize,
+    largest: u64,
+}
+
+/// This shard's unfinished tiles, estimated; refused when even the largest does not fit in the
+/// memory budget.
+fn tiles_to_run<'a>(
     opts: &ReconstructOptions,
     scene: &Scene,
-    tiles: &[Tile],
+    tiles: &'a [Tile],
     folder: &TileFolder,
-    progress: &dyn Progress,
-) -> Result<TilesRun> {
+) -> Result<TilesToRun<'a>> {
     let todo: Vec<&Tile> = tiles
         .iter()
         .filter(|t| {
@@ -629,6 +636,30 @@ fn run_tiles(
     let (rects, memory) = estimate_tiles(scene, &todo);
     let largest = check_tile_memory(opts, &rects, &memory)?;
     let in_flight = tiles_at_once(scene.matcher, opts.max_memory, largest, todo.len());
+    Ok(TilesToRun {
+        todo,
+        rects,
+        memory,
+        in_flight,
+        largest,
+    })
+}
+
+/// Runs the tiles, as many at once as the memory budget allows, saving each one's record and
+/// cells as it ends.
+fn run_tiles(
+    scene: &Scene,
+    tiles: TilesToRun,
+    folder: &TileFolder,
+    progress: &dyn Progress,
+) -> Result<TilesRun> {
+    let TilesToRun {
+        todo,
+        rects,
+        memory,
+        in_flight,
+        largest,
+    } = tiles;
     progress.begin(&format!("tiles ({in_flight} at once)"), todo.len());
     let ran = run_on_workers(
         &todo,
@@ -672,18 +703,6 @@ fn estimate_tiles(scene: &Scene, tiles: &[&Tile]) -> (Vec<Result<Rectification>>
     (rects, memory)
 }
 
-/// A tile that does not fit in the memory budget, found before any tile runs.
-#[derive(Debug)]
-struct TileTooLarge(String);
-
-impl std::fmt::Display for TileTooLarge {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for TileTooLarge {}
-
 /// Disparity ranges wider than this, pixels, come from altitudes far wider than a city's:
 /// unknown altitudes or a camera of another image.
 const IMPLAUSIBLE_RANGE_PX: i32 = 400;
@@ -710,7 +729,7 @@ fn check_tile_memory(
             ),
             Some((lo, hi)) => format!("disparity range {lo}:{hi} px"),
         };
-        return Err(TileTooLarge(format!(
+        bail!(
             "one tile needs about {:.2} GiB (plus {:.2} GiB for the process), more than \
              --max-memory {:.2} GiB: raise --max-memory, use a smaller --tile (now {} px) or a \
              narrower --alt-range ({range})",
@@ -718,8 +737,7 @@ fn check_tile_memory(
             crate::flags::gib(PROCESS_BYTES),
             crate::flags::gib(opts.max_memory),
             opts.tile,
-        ))
-        .into());
+        );
     }
     Ok(largest)
 }
